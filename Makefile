@@ -1,0 +1,32 @@
+# Set-up is part of every target: a fresh clone needs nothing but python3 (and apt for chromium).
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: run test bench lint chromium clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+chromium:
+	@command -v chromium >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq chromium; }
+
+run: $(STAMP)
+	$(VENV)/bin/skyring serve
+
+test: $(STAMP) chromium
+	$(PY) -m pytest -q -ra
+
+bench: $(STAMP)
+	$(VENV)/bin/skyring bench all
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check controller vehicles server webui tests
+
+clean:
+	rm -rf $(VENV) .pytest_cache

@@ -1,0 +1,47 @@
+"""Operator-facing formation parameters and the bundle of every controller parameter.
+
+Each concept's own parameters live beside it (`MpcParams` in mpc.py, `FieldParams` in fields.py,
+`TrackerParams` in tracker.py, `NoiseParams` in measurement.py); this module gathers them so a MAV's whole
+controller configuration is one frozen value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+from controller.fields import FieldParams
+from controller.measurement import NoiseParams
+from controller.mpc import MpcParams
+from controller.tracker import TrackerParams
+
+
+class Method(str, Enum):
+    """Formation method: the paper's (`active`) or one of its two baselines (METHOD.md "Baselines")."""
+
+    ACTIVE = "active"
+    DQMPC = "dqmpc"
+    PRICE = "price"
+
+
+@dataclass(frozen=True)
+class FormationParams:
+    """What the operator sets while flying.
+
+    d_des_m: desired horizontal distance of every MAV from the person (paper: 8 m);
+    h_des_m: desired height of every MAV above the person (paper: 8 m).
+    """
+
+    d_des_m: float = 8.0
+    h_des_m: float = 8.0
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Everything one MAV's controller needs, with the defaults of METHOD.md."""
+
+    method: Method = Method.ACTIVE
+    mpc: MpcParams = field(default_factory=MpcParams)
+    fields: FieldParams = field(default_factory=FieldParams)
+    tracker: TrackerParams = field(default_factory=TrackerParams)
+    noise: NoiseParams = field(default_factory=NoiseParams)
