@@ -1,0 +1,96 @@
+"""The autopilot interface every back-end implements (simulated, PX4 through MAVSDK).
+
+Commands are requests: they return at once and their effect shows in later `state()` readings, so the same
+synchronous agent core drives a stepped simulation and an asyncio PX4 link alike. Everything is in the team's
+ENU world frame; conversion to NED/geodetic happens inside the PX4 back-end only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Protocol
+
+import numpy as np
+
+from controller.messages import _freeze
+
+
+class FlightMode(str, Enum):
+    """The autopilot's flight mode as skyring understands it (PX4 custom modes map onto these)."""
+
+    UNKNOWN = "unknown"
+    READY = "ready"  # on the ground, waiting
+    TAKEOFF = "takeoff"
+    HOLD = "hold"  # loiter at the current position
+    OFFBOARD = "offboard"  # following skyring's set-points
+    LAND = "land"
+    RETURN = "return"
+    MANUAL = "manual"  # a pilot (position/altitude/manual/stabilized): skyring does not fight for control
+
+
+@dataclass(frozen=True, eq=False)
+class AutopilotState:
+    """One reading of a vehicle's telemetry, world ENU frame.
+
+    position_m (3,), velocity_mps (3,), yaw_rad (ENU), roll_rad/pitch_rad (body attitude),
+    position_cov_m2 (3, 3) self-localisation covariance; battery_fraction in [0, 1] or None when unknown;
+    stamp_s: when this reading was taken (the caller's clock).
+    """
+
+    vehicle_id: int
+    stamp_s: float
+    position_m: np.ndarray
+    velocity_mps: np.ndarray
+    yaw_rad: float
+    armed: bool
+    in_air: bool
+    mode: FlightMode
+    roll_rad: float = 0.0
+    pitch_rad: float = 0.0
+    battery_fraction: float | None = None
+    healthy: bool = True
+    position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
+
+    def __post_init__(self) -> None:
+        _freeze(self, "position_m", (3,))
+        _freeze(self, "velocity_mps", (3,))
+        _freeze(self, "position_cov_m2", (3, 3))
+
+
+@dataclass(frozen=True, eq=False)
+class Setpoint:
+    """An offboard set-point: ENU position_m (3,), velocity_mps (3,) feed-forward, yaw_rad (ENU), made at stamp_s."""
+
+    stamp_s: float
+    position_m: np.ndarray
+    velocity_mps: np.ndarray
+    yaw_rad: float
+
+    def __post_init__(self) -> None:
+        _freeze(self, "position_m", (3,))
+        _freeze(self, "velocity_mps", (3,))
+        if not (np.all(np.isfinite(self.position_m)) and np.all(np.isfinite(self.velocity_mps))
+                and np.isfinite(self.yaw_rad)):
+            raise ValueError("a set-point must be finite")
+
+
+class Autopilot(Protocol):
+    """What the agent and the ground station need from a vehicle's autopilot."""
+
+    vehicle_id: int
+
+    def state(self) -> AutopilotState | None:
+        """The latest telemetry, or None before the first reading."""
+
+    def send_setpoint(self, setpoint: Setpoint) -> None:
+        """Follow this set-point (entering offboard if needed and allowed)."""
+
+    def takeoff(self, height_m: float) -> None:
+        """Arm and climb to height_m above the ground, then hold."""
+
+    def hold(self) -> None:
+        """Stop following set-points and hold position."""
+
+    def land(self) -> None:
+        """Land where it is and disarm."""
