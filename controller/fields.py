@@ -1,17 +1,443 @@
 """Potential fields: the cotangential magnitude function and every external input f(n) (paper Sec. III-E).
 
-TODO(helper fields): implement.
+The non-convex constraints of the formation (angular spacing 2 pi / K about the person, distance to teammates,
+trees, virtual obstacles and the person) enter the convex MPC as external accelerations f(n), one per horizon
+step n = 0..N, computed here from positions only. Equation numbers are the paper's as published (RA-L 2019):
+eq. 12 (`act_force_mag`), 13 (`actforce`), 14 (`rep_dyn`), 15 (`rep_sta`), 16 (`clamping`), 17 (`guarantee`).
+
+Every force is horizontal (z = 0), as in the authors' code. Arrays are ENU metres; forces are m/s^2 because they
+enter the dynamics as accelerations. Everything here is a pure function of its arguments.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+
+import numpy as np
+
+from controller.messages import HorizonPlan, Obstacle
+
+HALF_PI = 0.5 * np.pi
+TWO_PI = 2.0 * np.pi
 
 
 @dataclass(frozen=True)
 class FieldParams:
     """Gains and thresholds of the external inputs (METHOD.md "The external inputs"). Distances in m, angles
-    in rad, forces in m/s^2 (they enter the dynamics as accelerations)."""
+    in rad, forces in m/s^2 (they enter the dynamics as accelerations).
+
+    Tuning (measured in tests/controller/test_closed_loop.py, 10 Hz, K = 2..16 from clustered starts; the
+    numbers are in the module comments next to each choice):
+
+    gain: G of every cotangential field (the original's 50).
+    f_max_mps2: clamp on the norm of the total input (eq. 16), above the input authority (3 m/s^2 per axis) so
+        that a close teammate or trunk wins over the MPC, as the guarantee (eq. 17) asks.
+    freeze_fraction: where the field stops growing: its argument z is held at (pi/2) * freeze_fraction at and
+        below d_min (METHOD.md's eps freeze), so F is finite there and strictly decreasing above d_min.
+
+    tracking_c: c of eq. 12, the force factor left on the circle. Raised from the paper's 0.1 so that the last
+        degrees of spacing converge (Pitfall 3); with c = 1 the factor (|r_des - rho| + c) is >= 1.
+    tracking_min_fraction: d_min of the angular field as a fraction of its d_max = 2 pi / K. The original's
+        d_min = 1 rad^2 on the squared angle inverts the thresholds for K >= 7; a fixed fraction keeps
+        d_min < 2 pi / K for every K, and a fraction near 1 makes the field steep close to 2 pi / K, whose cubic
+        tail (F ~ (d_max - d)^3) otherwise stalls the formation 10-50 degrees short (Pitfall 3).
+    tracking_max_mps2: separate clamp on the norm of the active-tracking sum (eq. 13), below the input authority
+        so that the MPC can always hold the MAV on the circle while it slides along it (Pitfall 2).
+
+    teammate_d_min_m: d_min of eq. 17 = e_max + v_max dt (1 m way-point tracking error + 5 m/s * 0.1 s).
+    teammate_d_max_base_m: d_max of a fresh plan from a teammate with zero localisation covariance; eq. 17 adds
+        both MAVs' covariance radii (sqrt of the largest eigenvalue) and teammate_speed_mps * message age. With
+        the default 0.25 m^2 covariances the fresh d_max is 3.0 m, below the 3.12 m chord of 16 MAVs on an 8 m
+        circle, so a finished formation feels no repulsion.
+    teammate_speed_mps: |v_max| of eq. 17 used to grow d_max with the age of the teammate's plan.
+    teammate_age_grace_s: message age that adds nothing to d_max: plans are aligned to our clock by their stamp,
+        so only staleness beyond one publish period is uncertain.
+
+    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 15 as distances to the cylinder's SURFACE (distance to
+        the axis minus the radius), so a thick trunk and a thin one keep the same clearance.
+
+    person_d_min_fraction, person_d_max_fraction: the person as an obstacle, thresholds as fractions of d_des
+        (METHOD.md: 7 m and 8 m for d_des = 8 m).
+
+    approach_range_m: an obstacle whose surface is closer than this to the MAV steers its approach angle.
+    approach_angle_rad: d_max of the approach-angle field, an angular difference about the person.
+    approach_max_mps2: clamp of the approach-angle sum, below the input authority for the same reason as the
+        active-tracking clamp (a tangential push beyond the authority runs the MAV off the circle).
+
+    dqmpc_d_min_m, dqmpc_d_max_m: the DQMPC baseline's repulsion thresholds (METHOD.md "Baselines").
+    """
 
     gain: float = 50.0
     f_max_mps2: float = 8.0
+    freeze_fraction: float = 0.1
+    tracking_c: float = 1.0
+    tracking_min_fraction: float = 0.5
+    tracking_max_mps2: float = 2.0
+    teammate_d_min_m: float = 1.5
+    teammate_d_max_base_m: float = 2.0
+    teammate_speed_mps: float = 5.0
+    teammate_age_grace_s: float = 0.1
+    obstacle_d_min_m: float = 1.5
+    obstacle_d_max_m: float = 3.0
+    person_d_min_fraction: float = 7.0 / 8.0
+    person_d_max_fraction: float = 1.0
+    approach_range_m: float = 3.0
+    approach_angle_rad: float = 0.5
+    approach_max_mps2: float = 2.0
+    dqmpc_d_min_m: float = 1.0
+    dqmpc_d_max_m: float = 4.0
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"FieldParams.{name} must be a finite number >= 0, got {value}")
+        if not 0.0 < self.freeze_fraction < 1.0:
+            raise ValueError("FieldParams.freeze_fraction must lie in (0, 1)")
+        if not 0.0 <= self.tracking_min_fraction < 1.0:
+            raise ValueError("FieldParams.tracking_min_fraction must lie in [0, 1): d_min < 2 pi / K")
+        if self.obstacle_d_min_m >= self.obstacle_d_max_m or self.dqmpc_d_min_m >= self.dqmpc_d_max_m:
+            raise ValueError("FieldParams: every d_min must be below its d_max")
+        if self.person_d_min_fraction >= self.person_d_max_fraction:
+            raise ValueError("FieldParams: person_d_min_fraction must be below person_d_max_fraction")
+
+
+@dataclass(frozen=True)
+class FieldTerms:
+    """Which external inputs a method uses (METHOD.md "Baselines").
+
+    active: every term. dqmpc: teammate and obstacle repulsion only, with its own thresholds. price: none inside
+    the MPC (its repulsion is applied after the MPC, see baselines.py).
+    """
+
+    tracking: bool = True
+    teammates: bool = True
+    obstacles: bool = True
+    person: bool = True
+    approach: bool = True
+    dqmpc_thresholds: bool = False
+
+    @classmethod
+    def for_method(cls, method: str) -> FieldTerms:
+        """The terms of a method by name ("active", "dqmpc", "price"; a `Method` enum value works too)."""
+        name = getattr(method, "value", method)
+        if name == "active":
+            return cls()
+        if name == "dqmpc":
+            return cls(tracking=False, person=False, approach=False, dqmpc_thresholds=True)
+        if name == "price":
+            return cls(tracking=False, teammates=False, obstacles=False, person=False, approach=False)
+        raise ValueError(f"unknown method {method!r}: choose active, dqmpc or price")
+
+
+@dataclass(frozen=True, eq=False)
+class TeammatePaths:
+    """Teammates' horizon plans aligned to our horizon, as arrays (J teammates, N+1 steps).
+
+    positions_m: (J, N+1, 3) teammate j's planned position at our step n; vehicle_ids: (J,) int, used only to
+    break exact ties; in_formation: (J,) bool, only these count for K and the angular term (all are avoided);
+    d_max_m: (J,) the teammate-repulsion d_max of eq. 17 for each (covariance radii and message age included).
+    """
+
+    positions_m: np.ndarray
+    vehicle_ids: np.ndarray
+    in_formation: np.ndarray
+    d_max_m: np.ndarray
+
+    @classmethod
+    def empty(cls, steps: int) -> TeammatePaths:
+        return cls(np.zeros((0, steps, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool), np.zeros(0))
+
+    @property
+    def count(self) -> int:
+        return int(self.positions_m.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class ObstacleSet:
+    """Vertical cylinders as arrays: centers_m (M, 2), radii_m (M,), heights_m (M,)."""
+
+    centers_m: np.ndarray
+    radii_m: np.ndarray
+    heights_m: np.ndarray
+
+    @classmethod
+    def from_obstacles(cls, obstacles: Sequence[Obstacle]) -> ObstacleSet:
+        """Stack obstacles; one with a non-finite centre is dropped (callers count `len(obstacles) - count`)."""
+        kept = [o for o in obstacles if np.all(np.isfinite(o.center_m))]
+        if not kept:
+            return cls(np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+        return cls(np.array([o.center_m for o in kept]), np.array([o.radius_m for o in kept]),
+                   np.array([o.height_m for o in kept]))
+
+    @property
+    def count(self) -> int:
+        return int(self.radii_m.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class ExternalInputs:
+    """The external inputs f(0..N) of one MAV, total and per term, each (N+1, 3) m/s^2 (z always 0).
+
+    total is what the MPC gets (eq. 16, clamped). The terms are before the total clamp (tracking and approach
+    after their own clamps) and are for display and debugging. fault is True when the total was not finite and
+    was replaced by zeros.
+    """
+
+    total: np.ndarray
+    tracking: np.ndarray
+    teammates: np.ndarray
+    obstacles: np.ndarray
+    person: np.ndarray
+    approach: np.ndarray
+    fault: bool = False
+
+
+def cotangential_magnitude(d, *, d_min, d_max, gain: float, freeze_fraction: float = 0.1):
+    """Cotangential field magnitude F(d) (paper Sec. III-E; METHOD.md "Potential-field magnitude").
+
+    F(d) = G (pi/2) / D * (cot z + z - pi/2) with D = d_max - d_min and z rising linearly from
+    z0 = (pi/2) * freeze_fraction at d = d_min to pi/2 at d = d_max. So F(d_max) = 0, F = 0 beyond, F is strictly
+    decreasing on (d_min, d_max) (dF/dz = -G (pi/2)/D cot^2 z), and it is held at the finite F(d_min) below
+    d_min. This is the original field with its pole moved just below d_min, instead of the original's flat
+    freeze over [d_min, d_min + 0.1], so the function is strictly monotone above d_min.
+
+    d, d_min, d_max: floats or arrays that broadcast (d_min < d_max elementwise). Returns a float for scalar
+    arguments, else an array of the broadcast shape.
+    """
+    d_arr = np.asarray(d, dtype=float)
+    lo = np.asarray(d_min, dtype=float)
+    span = np.asarray(d_max, dtype=float) - lo
+    if np.any(span <= 0.0):
+        raise ValueError("cotangential_magnitude needs d_min < d_max")
+    z0 = HALF_PI * freeze_fraction
+    frac = np.clip((d_arr - lo) / span, 0.0, 1.0)
+    z = z0 + (HALF_PI - z0) * frac
+    out = (gain * HALF_PI) / span * (1.0 / np.tan(z) + z - HALF_PI)
+    out = np.where(frac >= 1.0, 0.0, np.maximum(out, 0.0))
+    return float(out) if out.ndim == 0 else out
+
+
+def plan_path(plan: HorizonPlan, *, now_s: float, dt_s: float, steps: int) -> np.ndarray:
+    """(steps, 3) a teammate's planned positions at our times now_s + n dt_s, n = 0..steps-1.
+
+    The plan is shifted by its age and linearly interpolated; before its x(0) and beyond its last state it is
+    held (a plan older than its horizon is the teammate's last planned position).
+    """
+    t = now_s + dt_s * np.arange(steps)
+    last = len(plan.positions_m) - 1
+    k = np.clip((t - plan.stamp_s) / plan.dt_s, 0.0, float(last))
+    lo = np.minimum(np.floor(k).astype(int), last)
+    hi = np.minimum(lo + 1, last)
+    a = (k - lo)[:, None]
+    return (1.0 - a) * plan.positions_m[lo] + a * plan.positions_m[hi]
+
+
+def covariance_radius_m(cov_m2: np.ndarray) -> float:
+    """Radius of a position covariance for eq. 17: the square root of its largest eigenvalue (m)."""
+    return float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(cov_m2, dtype=float))[-1], 0.0)))
+
+
+def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, steps: int,
+                   own_cov_radius_m: float, params: FieldParams,
+                   current_position_only: bool = False) -> TeammatePaths:
+    """Align every teammate's latest plan to our horizon and compute its eq. 17 d_max.
+
+    d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace), the
+    guarantee's r_sigma_k + r_sigma_j + r_comm on top of a fixed base. current_position_only (the `price`
+    baseline, which shares no plans) uses only each plan's x(0), held over the horizon. Plans must be finite
+    (the formation controller rejects and counts the others before calling this).
+    """
+    if not plans:
+        return TeammatePaths.empty(steps)
+    paths = np.empty((len(plans), steps, 3))
+    d_max = np.empty(len(plans))
+    for i, plan in enumerate(plans):
+        if current_position_only:
+            paths[i] = plan.positions_m[0]
+        else:
+            paths[i] = plan_path(plan, now_s=now_s, dt_s=dt_s, steps=steps)
+        age = max(now_s - plan.stamp_s - params.teammate_age_grace_s, 0.0)
+        d_max[i] = (params.teammate_d_max_base_m + own_cov_radius_m + covariance_radius_m(plan.position_cov_m2)
+                    + params.teammate_speed_mps * age)
+    ids = np.array([p.vehicle_id for p in plans], dtype=int)
+    in_formation = np.array([p.in_formation for p in plans], dtype=bool)
+    return TeammatePaths(paths, ids, in_formation, d_max)
+
+
+def clamp_norm(vectors: np.ndarray, limit: float) -> np.ndarray:
+    """Scale every row of (..., k) whose norm exceeds limit down to norm limit (eq. 16's rule)."""
+    norms = np.sqrt(np.einsum("...i,...i->...", vectors, vectors))
+    scale = np.minimum(1.0, limit / np.maximum(norms, 1e-300))
+    return vectors * scale[..., None]
+
+
+def _tangents(rel_xy: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """Counter-clockwise unit tangents (..., 2) of the circles about the person; zero where rho ~ 0."""
+    safe = np.where(rho > 1e-9, rho, np.inf)
+    return np.stack((-rel_xy[..., 1], rel_xy[..., 0]), axis=-1) / safe[..., None]
+
+
+def _away(diff_xy: np.ndarray, dist: np.ndarray, tie_sign: np.ndarray | float) -> np.ndarray:
+    """Unit vectors along diff_xy (..., 2); where dist ~ 0, +-x by tie_sign so that two MAVs split."""
+    unit = diff_xy / np.where(dist > 1e-9, dist, np.inf)[..., None]
+    tie = dist <= 1e-9
+    if np.any(tie):
+        unit = unit.copy()
+        fallback = np.zeros_like(unit)
+        fallback[..., 0] = np.broadcast_to(tie_sign, dist.shape)
+        unit[tie] = fallback[tie]
+    return unit
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Wrap angles to [-pi, pi)."""
+    return (angle + np.pi) % TWO_PI - np.pi
+
+
+def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.ndarray, mate_ids: np.ndarray,
+                    own_id: int, team_size: int, d_des_m: float, params: FieldParams) -> np.ndarray:
+    """Active-tracking input (eqs. 12-13), (N+1, 2), before its clamp.
+
+    rel_xy (N+1, 2) own horizontal position minus the person's, rho (N+1,) its norm; mates_rel_xy (J, N+1, 2)
+    the in-formation teammates' positions minus the person's. For every teammate j the magnitude is
+    (|d_des - rho| + c) F(delta) with delta in [0, pi] the angle between the two bearings about the person,
+    thresholds d_min = tracking_min_fraction * 2 pi / K, d_max = 2 pi / K; the direction is the tangent of the
+    circle about the person that points away from j (exact ties split by vehicle id).
+    """
+    if mates_rel_xy.shape[0] == 0 or team_size < 2:
+        return np.zeros_like(rel_xy)
+    gamma = np.arctan2(rel_xy[:, 1], rel_xy[:, 0])
+    gamma_j = np.arctan2(mates_rel_xy[..., 1], mates_rel_xy[..., 0])
+    signed = _wrap(gamma[None, :] - gamma_j)
+    d_max = TWO_PI / team_size
+    mag = cotangential_magnitude(np.abs(signed), d_min=params.tracking_min_fraction * d_max, d_max=d_max,
+                                 gain=params.gain, freeze_fraction=params.freeze_fraction)
+    side = np.sign(signed)
+    side = np.where(side == 0.0, np.where(own_id < mate_ids, -1.0, 1.0)[:, None], side)
+    scalar = (np.abs(d_des_m - rho) + params.tracking_c) * (mag * side).sum(axis=0)
+    return scalar[:, None] * _tangents(rel_xy, rho)
+
+
+def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, params: FieldParams,
+                     tie_sign: np.ndarray | float = 1.0, active: np.ndarray | None = None) -> np.ndarray:
+    """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eqs. 14, 15), (N+1, 2).
+
+    diff_xy (M, N+1, 2) from each obstacle to us, dist (M, N+1) the distance the thresholds apply to, d_min and
+    d_max broadcast against dist; active (M, N+1) masks entries out.
+    """
+    if diff_xy.shape[0] == 0:
+        return np.zeros(diff_xy.shape[1:])
+    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=params.gain,
+                                 freeze_fraction=params.freeze_fraction)
+    if active is not None:
+        mag = np.where(active, mag, 0.0)
+    norm = np.sqrt(np.einsum("...i,...i->...", diff_xy, diff_xy))
+    return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)
+
+
+def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, person_xy: np.ndarray,
+                    obstacles: ObstacleSet, active: np.ndarray, params: FieldParams) -> np.ndarray:
+    """Approach-angle input against local minima behind obstacles, (N+1, 2), before its clamp.
+
+    For an obstacle whose surface is within approach_range_m of the MAV (active (M, N+1) masks the rest), a
+    tangential push of magnitude F(|gamma_k - gamma_m|) (thresholds 0 and approach_angle_rad about the person)
+    times a ramp (1 - surface distance / approach_range_m), pointing away from the obstacle's bearing about the
+    person (the original always pushed counter-clockwise).
+    """
+    if obstacles.count == 0:
+        return np.zeros_like(rel_xy)
+    obs_rel = obstacles.centers_m[:, None, :] - person_xy
+    gamma_m = np.arctan2(obs_rel[..., 1], obs_rel[..., 0])
+    gamma = np.arctan2(rel_xy[:, 1], rel_xy[:, 0])
+    signed = _wrap(gamma[None, :] - gamma_m)
+    mag = cotangential_magnitude(np.abs(signed), d_min=0.0, d_max=params.approach_angle_rad, gain=params.gain,
+                                 freeze_fraction=params.freeze_fraction)
+    surface = (np.linalg.norm(own_xy[None, :, :] - obstacles.centers_m[:, None, :], axis=-1)
+               - obstacles.radii_m[:, None])
+    ramp = np.clip(1.0 - surface / params.approach_range_m, 0.0, 1.0)
+    side = np.where(signed >= 0.0, 1.0, -1.0)
+    scalar = np.where(active, mag * ramp * side, 0.0).sum(axis=0)
+    return scalar[:, None] * _tangents(rel_xy, rho)
+
+
+def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarray, teammates: TeammatePaths,
+                    obstacles: ObstacleSet, team_size: int, d_des_m: float, params: FieldParams,
+                    terms: FieldTerms, own_id: int = 0, in_formation: bool = True) -> ExternalInputs:
+    """Every external input for horizon steps n = 0..N and their clamped total (eqs. 12-16).
+
+    own_positions_m: (N+1, 3) our position at step n (the previous plan, the current position at n = 0);
+    person_position_m: (3,) or (N+1, 3) the fused person estimate (per step if predicted over the horizon);
+    teammates: all teammates (in formation or not); obstacles: trees and virtual obstacles; team_size: K, the
+    number of MAVs in formation including us; in_formation: False drops our own active-tracking term.
+
+    total = clamp_{f_max}(clamp_{tracking_max}(f_act) + f_dyn + f_sta + f_person + clamp_{approach_max}(f_ang)),
+    METHOD.md Pitfall 2: the tangential terms are clamped below the input authority on their own, the safety
+    terms only by the total clamp. A non-finite total becomes zero with fault=True.
+    """
+    own = np.asarray(own_positions_m, dtype=float)
+    steps = own.shape[0]
+    own_xy = own[:, :2]
+    person_xy = np.broadcast_to(np.asarray(person_position_m, dtype=float)[..., :2], (steps, 2))
+    rel = own_xy - person_xy
+    rho = np.sqrt(np.einsum("ij,ij->i", rel, rel))
+    zero = np.zeros((steps, 2))
+    tracking = teammate = obstacle = person = approach = zero
+
+    if terms.tracking and in_formation and teammates.count:
+        mates = teammates.in_formation
+        if np.any(mates):
+            mates_rel = teammates.positions_m[mates, :, :2] - person_xy[None]
+            tracking = clamp_norm(tracking_inputs(rel_xy=rel, rho=rho, mates_rel_xy=mates_rel,
+                                                  mate_ids=teammates.vehicle_ids[mates], own_id=own_id,
+                                                  team_size=team_size, d_des_m=d_des_m, params=params),
+                                  params.tracking_max_mps2)
+
+    if terms.teammates and teammates.count:
+        diff = own_xy[None] - teammates.positions_m[..., :2]
+        dist = np.sqrt(np.einsum("jni,jni->jn", diff, diff))
+        if terms.dqmpc_thresholds:
+            d_min, d_max = params.dqmpc_d_min_m, params.dqmpc_d_max_m
+        else:
+            d_min = params.teammate_d_min_m
+            d_max = np.maximum(teammates.d_max_m, d_min + 1e-3)[:, None]
+        tie = np.where(own_id < teammates.vehicle_ids, -1.0, 1.0)[:, None]
+        teammate = repulsion_inputs(diff_xy=diff, dist=dist, d_min=d_min, d_max=d_max, params=params,
+                                    tie_sign=tie)
+
+    if (terms.obstacles or terms.approach) and obstacles.count:
+        diff = own_xy[None] - obstacles.centers_m[:, None, :]
+        surface = np.sqrt(np.einsum("mni,mni->mn", diff, diff)) - obstacles.radii_m[:, None]
+        if terms.dqmpc_thresholds:
+            d_min, d_max = params.dqmpc_d_min_m, params.dqmpc_d_max_m
+        else:
+            d_min, d_max = params.obstacle_d_min_m, params.obstacle_d_max_m
+        # A cylinder counts only where the MAV is not clearly above its top.
+        below_top = own[None, :, 2] < obstacles.heights_m[:, None] + d_min
+        if terms.obstacles:
+            obstacle = repulsion_inputs(diff_xy=diff, dist=surface, d_min=d_min, d_max=d_max, params=params,
+                                        active=below_top)
+        if terms.approach and in_formation:
+            near = below_top & (surface < params.approach_range_m)
+            if np.any(near):
+                approach = clamp_norm(approach_inputs(own_xy=own_xy, rel_xy=rel, rho=rho, person_xy=person_xy,
+                                                      obstacles=obstacles, active=near, params=params),
+                                      params.approach_max_mps2)
+
+    if terms.person:
+        lo, hi = params.person_d_min_fraction * d_des_m, params.person_d_max_fraction * d_des_m
+        if hi > 0.0 and np.any(rho < hi):
+            person = repulsion_inputs(diff_xy=rel[None], dist=rho[None], d_min=lo, d_max=hi, params=params)
+
+    total_xy = clamp_norm(tracking + teammate + obstacle + person + approach, params.f_max_mps2)
+    fault = not bool(np.all(np.isfinite(total_xy)))
+    if fault:
+        total_xy = zero
+
+    def as3(xy: np.ndarray) -> np.ndarray:
+        out = np.zeros((steps, 3))
+        out[:, :2] = xy
+        return out
+
+    return ExternalInputs(total=as3(total_xy), tracking=as3(tracking), teammates=as3(teammate),
+                          obstacles=as3(obstacle), person=as3(person), approach=as3(approach), fault=fault)

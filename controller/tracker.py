@@ -1,16 +1,303 @@
-"""The cooperative person tracker (paper Sec. III-B): a Kalman filter replica per MAV.
+"""The cooperative person tracker (paper Sec. III-B): one MAV's Kalman-filter replica of the person's state.
 
-TODO(helper tracker): implement.
+Every MAV fuses its own and its teammates' world-frame detections, each with its own covariance
+(measurement.py), in a linear Kalman filter (filterpy) on x = [p (3), v (3)] (ENU, m and m/s).
+
+Motion model (METHOD.md, from the authors' original): the velocity decays exponentially, to
+`velocity_decay_fraction` of itself over `velocity_decay_time_s` (time constant tau = T / ln(1 / fraction),
+1.30 s by default), driven by white noise (an Ornstein-Uhlenbeck velocity). The noise is given as a standard
+deviation per square-root second, sigma_q (m/s/sqrt(s)): over a short dt the velocity's variance grows by
+sigma_q^2 dt, so the original's "(0.5, 0.5, 0.1) per second" is read as sigma_q, i.e. a spectral density
+q = sigma_q^2 m^2/s^3. Read as variances instead (q = 0.5), the filter was too cautious in the consistency test
+(average NEES 2.6 against 3; tests/controller/test_tracker.py); as standard deviations it is consistent.
+Exact discretisation over dt, per axis, with b = exp(-dt / tau):
+
+    F = [[1, tau (1 - b)], [0, b]]
+    Q_vv = q tau (1 - b^2) / 2,   Q_pv = q tau^2 [(1 - b) - (1 - b^2) / 2],
+    Q_pp = q tau^2 [dt - 2 tau (1 - b) + tau (1 - b^2) / 2].
+
+A new track starts at its first detection with zero velocity and the covariance initial_cov_diag.
+
+Robustness: a detection with non-finite values or a covariance that is not symmetric positive definite is
+INVALID; one whose Mahalanobis distance from the prediction exceeds gate_sigma is GATED; neither changes the
+filter. Out-of-order detections (link latency) are merged by re-filtering: the tracker keeps the last
+`cache_size` accepted detections in time order (ties broken by source id), each with the filter state just
+before it was applied. A late detection is gated against the state before the first cached detection that
+follows it; if accepted, the filter is restored to that state and the late detection and all later cached ones
+are applied again in order (the later ones are not gated again: they were accepted before). A detection older
+than the oldest cached one, or one already applied (same source and stamp), is STALE. After reset_after_s
+without an accepted detection the track expires and the next detection starts a new one (RESET).
 """
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from controller.messages import Detection, PersonEstimate
 
 
 @dataclass(frozen=True)
 class TrackerParams:
-    """Motion model, gating and reset of the person tracker (METHOD.md "Person tracker")."""
+    """Motion model, gating and reset of the person tracker (METHOD.md "Person tracker").
+
+    gate_sigma: Mahalanobis distance (3 dof, in sigmas) beyond which a detection is rejected;
+    reset_after_s: the track expires after this long without an accepted detection;
+    velocity_decay_fraction, velocity_decay_time_s: the velocity decays to this fraction of itself in this time;
+    velocity_noise_mps_per_sqrt_s: (3,) white-noise standard deviation on the velocity per sqrt(second)
+    (the velocity's variance grows by its square per second);
+    initial_cov_diag: (6,) diagonal of a new track's covariance about its first detection (m^2, m^2/s^2);
+    cache_size: how many accepted detections are kept for re-filtering out-of-order ones.
+    """
 
     gate_sigma: float = 6.0
     reset_after_s: float = 10.0
+    velocity_decay_fraction: float = 0.1
+    velocity_decay_time_s: float = 3.0
+    velocity_noise_mps_per_sqrt_s: tuple[float, float, float] = (0.5, 0.5, 0.1)
+    initial_cov_diag: tuple[float, float, float, float, float, float] = (100.0, 100.0, 10.0, 1.0, 1.0, 0.5)
+    cache_size: int = 20
+
+    def __post_init__(self) -> None:
+        if not (self.gate_sigma > 0 and self.reset_after_s > 0 and self.velocity_decay_time_s > 0):
+            raise ValueError("gate_sigma, reset_after_s and velocity_decay_time_s must be > 0")
+        if not 0.0 < self.velocity_decay_fraction < 1.0:
+            raise ValueError(f"velocity_decay_fraction must be in (0, 1), got {self.velocity_decay_fraction}")
+        noise = self.velocity_noise_mps_per_sqrt_s
+        if len(noise) != 3 or not all(np.isfinite(q) and q >= 0 for q in noise):
+            raise ValueError(f"velocity_noise_mps_per_sqrt_s must be 3 finite values >= 0, got {noise}")
+        if len(self.initial_cov_diag) != 6 or not all(np.isfinite(c) and c > 0 for c in self.initial_cov_diag):
+            raise ValueError(f"initial_cov_diag must be 6 finite values > 0, got {self.initial_cov_diag}")
+        if self.cache_size < 2:
+            raise ValueError(f"cache_size must be >= 2, got {self.cache_size}")
+
+    @property
+    def velocity_time_constant_s(self) -> float:
+        """tau of the exponential velocity decay, s."""
+        return self.velocity_decay_time_s / float(np.log(1.0 / self.velocity_decay_fraction))
+
+
+class Verdict(StrEnum):
+    """What the tracker did with one detection."""
+
+    ACCEPTED = "accepted"  # fused (the very first detection starts the track)
+    GATED = "gated"  # farther than gate_sigma from the prediction: ignored
+    STALE = "stale"  # older than the re-filtering cache, or already applied: ignored
+    INVALID = "invalid"  # non-finite values or a covariance that is not symmetric positive definite: ignored
+    RESET = "reset"  # the track had expired (reset_after_s without data): a new track starts here
+
+
+@dataclass(frozen=True)
+class TrackerStats:
+    """How many detections got each verdict (disjoint counts; `resets` counts RESET). out_of_order counts the
+    ACCEPTED ones that arrived after a later-stamped one and were merged by re-filtering."""
+
+    accepted: int = 0
+    gated: int = 0
+    stale: int = 0
+    invalid: int = 0
+    resets: int = 0
+    out_of_order: int = 0
+
+
+_F_PV = np.eye(6, k=3)  # position <- velocity coupling in F
+_V_DIAG = np.diag([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
+
+
+def _noise_templates(noise_psd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(6, 6) matrices M_pp, M_pv, M_vv with Q = Q_pp M_pp + Q_pv M_pv + Q_vv M_vv (per unit density)."""
+    zeros, diag = np.zeros((3, 3)), np.diag(np.asarray(noise_psd, dtype=float))
+    return (np.block([[diag, zeros], [zeros, zeros]]), np.block([[zeros, diag], [diag, zeros]]),
+            np.block([[zeros, zeros], [zeros, diag]]))
+
+
+def _transition(dt_s: float, tau_s: float, templates: tuple[np.ndarray, np.ndarray, np.ndarray]
+                ) -> tuple[np.ndarray, np.ndarray]:
+    b = float(np.exp(-dt_s / tau_s))
+    one_b, one_b2 = 1.0 - b, 1.0 - b * b
+    F = np.eye(6) + (tau_s * one_b) * _F_PV - one_b * _V_DIAG
+    m_pp, m_pv, m_vv = templates
+    Q = (tau_s * tau_s * (dt_s - 2.0 * tau_s * one_b + 0.5 * tau_s * one_b2)) * m_pp
+    Q += (tau_s * tau_s * (one_b - 0.5 * one_b2)) * m_pv
+    Q += (0.5 * tau_s * one_b2) * m_vv
+    return F, Q
+
+
+def transition(*, dt_s: float, params: TrackerParams) -> tuple[np.ndarray, np.ndarray]:
+    """(F (6, 6), Q (6, 6)) of the decaying-velocity model over dt_s >= 0 (module docstring)."""
+    psd = np.square(np.asarray(params.velocity_noise_mps_per_sqrt_s, dtype=float))
+    return _transition(dt_s, params.velocity_time_constant_s, _noise_templates(psd))
+
+
+@dataclass
+class _Entry:
+    """A cached accepted detection: sort key (stamp s, source id), z (3, 1), R (3, 3), and the filter state
+    (time, x (6, 1), P (6, 6)) just before it was applied (None for the detection that started the track)."""
+
+    key: tuple[float, int]
+    z: np.ndarray
+    R: np.ndarray
+    t_before: float | None = None
+    x_before: np.ndarray | None = None
+    P_before: np.ndarray | None = None
+
+
+class PersonTracker:
+    """One MAV's replica of the person's state, fed by world-frame detections from every teammate.
+
+    Pure and deterministic: time comes only from detection stamps and from the now_s given to estimate().
+    """
+
+    def __init__(self, params: TrackerParams | None = None) -> None:
+        self.params = params or TrackerParams()
+        self._tau = self.params.velocity_time_constant_s
+        psd = np.square(np.asarray(self.params.velocity_noise_mps_per_sqrt_s, dtype=float))
+        self._templates = _noise_templates(psd)
+        self._memo: tuple[float, np.ndarray, np.ndarray] = (-1.0, np.eye(6), np.zeros((6, 6)))
+        self._P0 = np.diag(np.asarray(self.params.initial_cov_diag, dtype=float))
+        self._kf = KalmanFilter(dim_x=6, dim_z=3)
+        self._kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
+        self._t: float | None = None  # time of the filter's state; None before the first detection
+        self._cache: list[_Entry] = []
+        self._counts = dict.fromkeys(("accepted", "gated", "stale", "invalid", "resets", "out_of_order"), 0)
+
+    def stats(self) -> TrackerStats:
+        """The verdict counters so far."""
+        return TrackerStats(**self._counts)
+
+    def estimate(self, now_s: float) -> PersonEstimate | None:
+        """The person's state predicted to now_s, without changing the filter.
+
+        None before the first detection, for a non-finite now_s, and once the last accepted detection is more
+        than reset_after_s older than now_s. A now_s before the filter's time gives the filter's own state,
+        stamped at its own time (the tracker never predicts backwards).
+        """
+        if self._t is None or not np.isfinite(now_s) or now_s - self._t > self.params.reset_after_s:
+            return None
+        x, P, stamp = self._kf.x, self._kf.P, self._t
+        if now_s > self._t:
+            F, Q = self._fq(now_s - self._t)
+            x, P, stamp = F @ x, F @ P @ F.T + Q, float(now_s)
+        return PersonEstimate(stamp_s=stamp, position_m=x[:3, 0], velocity_mps=x[3:, 0], cov=0.5 * (P + P.T))
+
+    def update(self, detection: Detection) -> Verdict:
+        """Fuse one detection. Never raises for bad data; a rejected detection leaves the filter unchanged."""
+        checked = _checked(detection)
+        if checked is None:
+            return self._count(Verdict.INVALID)
+        key, z, R = checked
+        if self._t is None or key[0] - self._t > self.params.reset_after_s:
+            verdict = Verdict.ACCEPTED if self._t is None else Verdict.RESET
+            self._kf.x = np.vstack([z, np.zeros((3, 1))])
+            self._kf.P = self._P0.copy()
+            self._t = key[0]
+            self._cache = [_Entry(key, z, R)]
+            return self._count(verdict)
+        cache = self._cache
+        keys = [entry.key for entry in cache]
+        index = bisect.bisect_left(keys, key)
+        if index == 0 or (index < len(keys) and keys[index] == key):
+            return self._count(Verdict.STALE)
+        if index < len(cache):
+            return self._count(self._merge_late(index, key, z, R))
+        before = (self._t, self._kf.x.copy(), self._kf.P.copy())
+        self._predict_to(key[0])
+        if not self._within_gate(self._kf.x, self._kf.P, z, R):
+            self._t, self._kf.x, self._kf.P = before
+            return self._count(Verdict.GATED)
+        self._kf.update(z, R=R)
+        self._append(_Entry(key, z, R, *before))
+        return self._count(Verdict.ACCEPTED)
+
+    def _merge_late(self, index: int, key: tuple[float, int], z: np.ndarray, R: np.ndarray) -> Verdict:
+        """Gate a detection that belongs before cache[index] and, if it passes, re-filter from there."""
+        cache = self._cache
+        following = cache[index]
+        x, P = following.x_before, following.P_before
+        if key[0] > following.t_before:
+            F, Q = self._fq(key[0] - following.t_before)
+            x, P = F @ x, F @ P @ F.T + Q
+        if not self._within_gate(x, P, z, R):
+            return Verdict.GATED
+        self._t, self._kf.x, self._kf.P = following.t_before, following.x_before.copy(), following.P_before.copy()
+        cache.insert(index, _Entry(key, z, R))
+        replay = cache[index:]
+        del cache[index:]
+        for entry in replay:
+            entry.t_before, entry.x_before, entry.P_before = self._t, self._kf.x.copy(), self._kf.P.copy()
+            self._predict_to(entry.key[0])
+            self._kf.update(entry.z, R=entry.R)
+            self._append(entry)
+        self._counts["out_of_order"] += 1
+        return Verdict.ACCEPTED
+
+    def _append(self, entry: _Entry) -> None:
+        self._cache.append(entry)
+        if len(self._cache) > self.params.cache_size:
+            del self._cache[0]
+
+    def _predict_to(self, t_s: float) -> None:
+        if t_s > self._t:
+            F, Q = self._fq(t_s - self._t)
+            self._kf.predict(F=F, Q=Q)
+            self._t = t_s
+
+    def _count(self, verdict: Verdict) -> Verdict:
+        self._counts["resets" if verdict is Verdict.RESET else verdict.value] += 1
+        return verdict
+
+    def _fq(self, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """F, Q over dt_s, remembering the last pair (gating and prediction ask for the same dt in turn).
+        Callers must not modify the returned arrays."""
+        if dt_s != self._memo[0]:
+            self._memo = (dt_s, *_transition(dt_s, self._tau, self._templates))
+        return self._memo[1], self._memo[2]
+
+    def _within_gate(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> bool:
+        """Whether z (3, 1) lies within gate_sigma (Mahalanobis) of the predicted state x (6, 1), P (6, 6)."""
+        d2 = _mahalanobis_sq((P[:3, :3] + R).tolist(), (z - x[:3]).ravel().tolist())
+        return d2 <= self.params.gate_sigma**2
+
+
+def _mahalanobis_sq(S: list[list[float]], y: list[float]) -> float:
+    """y^T S^-1 y for a symmetric 3x3 S (nested lists) by its adjugate; inf when S is not positive definite.
+    Plain floats: for 3x3 this is several times faster than numpy.linalg."""
+    (a, b, c), (_, d, e), (_, _, f) = S
+    adj_aa, adj_ab, adj_ac = d * f - e * e, c * e - b * f, b * e - c * d
+    det = a * adj_aa + b * adj_ab + c * adj_ac
+    if not (a > 0.0 and a * d - b * b > 0.0 and det > 0.0):
+        return float("inf")
+    adj_bb, adj_bc, adj_cc = a * f - c * c, b * c - a * e, a * d - b * b
+    u, v, w = y
+    quad = (adj_aa * u * u + adj_bb * v * v + adj_cc * w * w
+            + 2.0 * (adj_ab * u * v + adj_ac * u * w + adj_bc * v * w))
+    return quad / det
+
+
+def _is_spd(m: list[list[float]]) -> bool:
+    """Whether a symmetric 3x3 matrix is positive definite (Sylvester: all leading principal minors > 0)."""
+    (a, b, c), (_, d, e), (_, _, f) = m
+    return a > 0.0 and a * d - b * b > 0.0 and a * (d * f - e * e) - b * (b * f - c * e) + c * (b * e - c * d) > 0.0
+
+
+def _checked(detection: Detection) -> tuple[tuple[float, int], np.ndarray, np.ndarray] | None:
+    """(sort key (stamp s, source id), z (3, 1), R (3, 3)) of a usable detection, or None."""
+    try:
+        key = (float(detection.stamp_s), int(detection.source_id))
+        z = np.asarray(detection.position_m, dtype=float).reshape(3, 1)
+        R = np.asarray(detection.cov_m2, dtype=float).reshape(3, 3)
+    except (TypeError, ValueError, AttributeError, OverflowError):
+        return None
+    # a sum is finite only if every term is (values near the float limit count as invalid too)
+    if not np.isfinite(key[0] + float(z.sum()) + float(R.sum())):
+        return None
+    if float(np.abs(R - R.T).max()) > 1e-9 * float(np.abs(R).max()):
+        return None
+    R = 0.5 * (R + R.T)
+    if not _is_spd(R.tolist()):
+        return None
+    return key, z, R

@@ -19,6 +19,12 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
+
+@app.callback()
+def _root() -> None:
+    """A group callback keeps typer in sub-command mode even when main() registers a single command."""
+
+
 # name -> "module:function". The function is a typer command (typed keyword parameters with typer.Option).
 COMMANDS: dict[str, str] = {
     "serve": "server.serve_command:serve",

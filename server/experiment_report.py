@@ -1,0 +1,501 @@
+"""Statistics over runs, the paper's claims checked against them, and `report.md`.
+
+Everything here is a pure function of the runs' JSON reports, so the same runs give the same report to the
+last character. Timings (the simulator's tick_ms and realtime_factor, the runs' wall time) differ from one
+machine and moment to the next: they are kept out of the tables and claims, in a last section of their own.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import stats as scipy_stats
+
+from server.experiments import Condition, Protocol, RunResult
+
+# Per-run summary metrics the claims and figures use (names of the simulator's JSON report, flattened).
+ERROR = "tracking_error_m.mean"
+UNCERTAINTY = "cov_trace_m2.mean"
+IN_FRAME = "in_frame_fraction"
+CENTER = "center_offset_px.mean"
+
+# Table order; any other metric the simulator reports follows alphabetically.
+METRIC_ORDER: tuple[str, ...] = (
+    "tracking_error_m.mean",
+    "tracking_error_m.median",
+    "tracking_error_m.p90",
+    "cov_trace_m2.mean",
+    "cov_trace_m2.median",
+    "in_frame_fraction",
+    "center_offset_px.mean",
+    "center_offset_px.median",
+    "spacing_error_deg",
+    "distance_error_m",
+    "height_error_m",
+    "min_separation_m",
+    "min_obstacle_clearance_m",
+    "min_person_distance_m",
+)
+TIMING_PREFIXES: tuple[str, ...] = ("tick_ms", "realtime_factor")
+
+# Tolerances of the paper's qualitative claims, stated in the report next to each verdict.
+IN_FRAME_MIN = 0.90  # paper: "almost 94 %" of frames with the person fully in the image (SE3)
+LOSS_TOLERANCE = 0.20  # "accurate up to 25 % loss": error within 20 % of the loss-free error
+OBSTACLE_TOLERANCE = 0.20  # "only slightly deteriorates": error within 20 % of the obstacle-free error
+LOSS_ACCURATE_PERCENT = 25.0
+
+
+def flatten(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
+    """`{"a": {"b": 1}}` -> `{"a.b": 1.0}`; numbers only (None and non-numbers are dropped)."""
+    flat: dict[str, float] = {}
+    for key, value in metrics.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(flatten(value, prefix=f"{name}."))
+        elif isinstance(value, bool):
+            flat[name] = float(value)
+        elif isinstance(value, int | float):
+            flat[name] = float(value)
+    return flat
+
+
+def is_timing(metric: str) -> bool:
+    """True for metrics measured with a clock (they vary between otherwise identical runs)."""
+    return metric.split(".")[0] in TIMING_PREFIXES
+
+
+@dataclass(frozen=True)
+class Stat:
+    """Spread of one metric over runs: n finite values, mean, median, quartiles (q25, q75), std, min, max."""
+
+    n: int
+    mean: float
+    median: float
+    q25: float
+    q75: float
+    std: float
+    min: float
+    max: float
+
+    @property
+    def iqr(self) -> float:
+        return self.q75 - self.q25
+
+
+def describe(values: Sequence[float]) -> Stat | None:
+    """The `Stat` of the finite values in `values`, or None if there are none."""
+    arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    if arr.size == 0:
+        return None
+    q25, median, q75 = np.percentile(arr, [25.0, 50.0, 75.0])
+    return Stat(
+        n=int(arr.size),
+        mean=float(arr.mean()),
+        median=float(median),
+        q25=float(q25),
+        q75=float(q75),
+        std=float(arr.std(ddof=1)) if arr.size > 1 else 0.0,
+        min=float(arr.min()),
+        max=float(arr.max()),
+    )
+
+
+@dataclass(frozen=True)
+class ConditionSummary:
+    """One condition's runs: per-run values of every metric (run order), and how many runs failed."""
+
+    condition: Condition
+    values: Mapping[str, tuple[float, ...]]
+    runs_ok: int
+    runs_failed: int
+
+    def stat(self, metric: str) -> Stat | None:
+        return describe(self.values.get(metric, ()))
+
+    def mean(self, metric: str) -> float | None:
+        s = self.stat(metric)
+        return None if s is None else s.mean
+
+
+@dataclass(frozen=True)
+class FamilySummary:
+    """A family's protocol and the summary of each of its conditions (protocol order)."""
+
+    protocol: Protocol
+    conditions: tuple[ConditionSummary, ...]
+
+    @property
+    def family(self) -> str:
+        return self.protocol.family
+
+    def metrics(self, *, timing: bool) -> list[str]:
+        """Metric names present in any run, table order; timing metrics only or none of them."""
+        names = {m for c in self.conditions for m in c.values if is_timing(m) == timing}
+        ordered = [m for m in METRIC_ORDER if m in names]
+        return ordered + sorted(names - set(ordered))
+
+    def find(self, **settings: Any) -> ConditionSummary | None:
+        """The first condition whose settings include all of `settings`."""
+        for c in self.conditions:
+            have = dict(c.condition.settings)
+            if all(have.get(k) == v for k, v in settings.items()):
+                return c
+        return None
+
+
+def summarize(protocol: Protocol, results: Sequence[RunResult]) -> FamilySummary:
+    """Group `results` of `protocol`'s family by condition, keeping run order."""
+    out = []
+    for cond in protocol.conditions:
+        runs = sorted(
+            (r for r in results if r.spec.family == protocol.family and r.spec.condition == cond),
+            key=lambda r: r.spec.run_index,
+        )
+        ok = [r for r in runs if r.ok]
+        flats = [flatten(r.report.get("metrics", {})) for r in ok]
+        names = sorted({m for f in flats for m in f})
+        values = {m: tuple(f.get(m, math.nan) for f in flats) for m in names}
+        out.append(
+            ConditionSummary(condition=cond, values=values, runs_ok=len(ok), runs_failed=len(runs) - len(ok))
+        )
+    return FamilySummary(protocol=protocol, conditions=tuple(out))
+
+
+# ---- the paper's claims ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ClaimCheck:
+    """One of the paper's claims for a family, our evidence, and the verdict (None: too little data)."""
+
+    family: str
+    claim: str
+    evidence: str
+    agrees: bool | None
+
+    @property
+    def verdict(self) -> str:
+        return {True: "agrees", False: "does not agree", None: "not judged"}[self.agrees]
+
+
+def _fmt(v: float | None) -> str:
+    if v is None or not math.isfinite(v):
+        return "n/a"
+    if v == 0:
+        return "0"
+    if abs(v) >= 1000 or abs(v) < 0.001:
+        return f"{v:.3g}"
+    return f"{v:.{max(0, 2 - int(math.floor(math.log10(abs(v)))))}f}"
+
+
+def _lower_p(a: Sequence[float], b: Sequence[float]) -> float | None:
+    """One-sided Mann-Whitney U p-value that `a` tends to be below `b` (None: too few runs)."""
+    a = [v for v in a if math.isfinite(v)]
+    b = [v for v in b if math.isfinite(v)]
+    if len(a) < 2 or len(b) < 2:
+        return None
+    return float(scipy_stats.mannwhitneyu(a, b, alternative="less").pvalue)
+
+
+def _p_text(p: float | None) -> str:
+    return "" if p is None else f"; one-sided Mann-Whitney p = {_fmt(p)}"
+
+
+def _lower_than_all(
+    family: str,
+    claim: str,
+    metric: str,
+    unit: str,
+    best: ConditionSummary | None,
+    others: Sequence[ConditionSummary | None],
+) -> ClaimCheck:
+    """Claim: `best` has a lower mean `metric` than every one of `others`."""
+    if best is None or any(o is None for o in others) or best.mean(metric) is None:
+        return ClaimCheck(family, claim, "the conditions to compare were not run", None)
+    parts = [f"{best.condition.name} {_fmt(best.mean(metric))} {unit}"]
+    agrees = True
+    for o in others:
+        m = o.mean(metric)
+        if m is None:
+            return ClaimCheck(family, claim, f"{metric} missing for {o.condition.name}", None)
+        agrees = agrees and best.mean(metric) < m
+        parts.append(
+            f"{o.condition.name} {_fmt(m)} {unit}"
+            f"{_p_text(_lower_p(best.values.get(metric, ()), o.values.get(metric, ())))}"
+        )
+    return ClaimCheck(family, claim, f"mean {metric}: " + " vs ".join(parts), agrees)
+
+
+def _methods_claims(s: FamilySummary) -> list[ClaimCheck]:
+    price = s.find(method="price")
+    dqmpc = s.find(method="dqmpc")
+    se3 = s.find(method="active", trees="none")
+    se4 = next(
+        (c for c in s.conditions if dict(c.condition.settings).get("method") == "active" and c is not se3),
+        None,
+    )
+    claims = [
+        _lower_than_all(
+            s.family,
+            "SE3 (active) has the lowest uncertainty of the person's estimate: lower mean "
+            "trace of the fused covariance than SE1 (Price et al.) and SE2 (DQMPC).",
+            UNCERTAINTY,
+            "m^2",
+            se3,
+            [price, dqmpc],
+        ),
+        _lower_than_all(
+            s.family,
+            "With obstacles to avoid, the active method (SE4) still has lower uncertainty "
+            "than both earlier methods.",
+            UNCERTAINTY,
+            "m^2",
+            se4,
+            [price, dqmpc],
+        ),
+    ]
+    claim = (
+        f"Without obstacles, the active method keeps the person fully in the image about 94 % of the time "
+        f"(we require at least {IN_FRAME_MIN:.0%})."
+    )
+    frac = None if se3 is None else se3.mean(IN_FRAME)
+    if frac is None:
+        claims.append(ClaimCheck(s.family, claim, "SE3 was not run", None))
+    else:
+        claims.append(
+            ClaimCheck(
+                s.family,
+                claim,
+                f"SE3 mean {IN_FRAME} = {_fmt(frac)} (lowest run {_fmt(se3.stat(IN_FRAME).min)})",
+                frac >= IN_FRAME_MIN,
+            )
+        )
+    claims.append(
+        _lower_than_all(
+            s.family,
+            "The active method tracks the person more accurately than Price et "
+            "al. (paper, real robots: about 0.7 m against 1.2 m mean error).",
+            ERROR,
+            "m",
+            se3,
+            [price],
+        )
+    )
+    return claims
+
+
+def _sweep(s: FamilySummary, metric: str) -> tuple[np.ndarray, np.ndarray]:
+    """(x, mean of `metric`) of the conditions that have it, in x order."""
+    pts = sorted((c.condition.x, c.mean(metric)) for c in s.conditions if c.mean(metric) is not None)
+    return np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
+
+
+def _trend_text(x: np.ndarray, y: np.ndarray, x_unit: str) -> str:
+    """The straight-line fit and rank correlation of the means over the sweep (three points or more)."""
+    if len(x) < 3:
+        return ""
+    if np.ptp(y) == 0.0:
+        return "; the means are all equal"
+    fit = scipy_stats.linregress(x, y)
+    rho = scipy_stats.spearmanr(x, y).statistic
+    return (f"; linear fit {_fmt(fit.slope)} m per {x_unit}, R^2 = {_fmt(fit.rvalue**2)}, "
+            f"Spearman rho = {_fmt(rho)}")
+
+
+def _scalability_claims(s: FamilySummary) -> list[ClaimCheck]:
+    claim = ("Tracking error falls as MAVs are added (paper: nearly linearly from 3 to 16 MAVs); we check "
+             "that the largest team's mean error is below the smallest team's and that a line fitted "
+             "through the means falls.")
+    x, y = _sweep(s, ERROR)
+    if len(x) < 2:
+        return [ClaimCheck(s.family, claim, "fewer than two team sizes were run", None)]
+    slope = scipy_stats.linregress(x, y).slope if len(x) >= 3 else (y[-1] - y[0]) / (x[-1] - x[0])
+    evidence = (f"mean {ERROR}: {x[0]:g} MAVs {_fmt(y[0])} m, {x[-1]:g} MAVs {_fmt(y[-1])} m"
+                f"{_trend_text(x, y, 'MAV')}")
+    return [ClaimCheck(s.family, claim, evidence, bool(y[-1] < y[0] and slope < 0))]
+
+
+def _commloss_claims(s: FamilySummary) -> list[ClaimCheck]:
+    x, y = _sweep(s, ERROR)
+    by_x = dict(zip(x.tolist(), y.tolist(), strict=True))
+    claim = (f"Tracking stays accurate up to {LOSS_ACCURATE_PERCENT:g} % link loss: mean error within "
+             f"{LOSS_TOLERANCE:.0%} of the error without loss.")
+    if 0.0 in by_x and LOSS_ACCURATE_PERCENT in by_x:
+        ratio = by_x[LOSS_ACCURATE_PERCENT] / by_x[0.0]
+        evidence = (f"mean {ERROR}: 0 % loss {_fmt(by_x[0.0])} m, {LOSS_ACCURATE_PERCENT:g} % loss "
+                    f"{_fmt(by_x[LOSS_ACCURATE_PERCENT])} m (ratio {_fmt(ratio)})")
+        claims = [ClaimCheck(s.family, claim, evidence, bool(ratio <= 1.0 + LOSS_TOLERANCE))]
+    else:
+        missing = f"0 % and {LOSS_ACCURATE_PERCENT:g} % loss were not both run"
+        claims = [ClaimCheck(s.family, claim, missing, None)]
+    claim = ("Tracking gets worse as more messages are lost: the error at the highest loss is above the "
+             "loss-free one.")
+    if len(x) >= 2 and x[0] == 0.0:
+        evidence = (f"mean {ERROR}: 0 % loss {_fmt(y[0])} m, {x[-1]:g} % loss {_fmt(y[-1])} m"
+                    f"{_trend_text(x, y, 'percent of loss')}")
+        claims.append(ClaimCheck(s.family, claim, evidence, bool(y[-1] > y[0])))
+    else:
+        claims.append(ClaimCheck(s.family, claim, "0 % loss and a higher loss were not both run", None))
+    return claims
+
+
+def _obstacles_claims(s: FamilySummary) -> list[ClaimCheck]:
+    claim = (f"More obstacles only slightly worsen tracking: mean error with the most obstacles within "
+             f"{OBSTACLE_TOLERANCE:.0%} of the error without obstacles.")
+    x, y = _sweep(s, ERROR)
+    if len(x) < 2 or x[0] != 0.0:
+        return [ClaimCheck(s.family, claim, "0 obstacles and a higher count were not both run", None)]
+    ratio = y[-1] / y[0]
+    evidence = (f"mean {ERROR}: 0 obstacles {_fmt(y[0])} m, {x[-1]:g} obstacles {_fmt(y[-1])} m "
+                f"(ratio {_fmt(ratio)}){_trend_text(x, y, 'obstacle')}")
+    return [ClaimCheck(s.family, claim, evidence, bool(ratio <= 1.0 + OBSTACLE_TOLERANCE))]
+
+
+CLAIMS = {
+    "methods": _methods_claims,
+    "scalability": _scalability_claims,
+    "commloss": _commloss_claims,
+    "obstacles": _obstacles_claims,
+}
+
+
+def check_claims(summary: FamilySummary) -> list[ClaimCheck]:
+    """The paper's claims for `summary`'s family (Sec. V-B), each judged on our numbers."""
+    return CLAIMS[summary.family](summary)
+
+
+# ---- report.md ---------------------------------------------------------------------------------------------
+
+# Section titles, with the paper's figure each family reproduces (by its caption; figure numbers differ
+# between the arXiv and RA-L versions).
+TITLES = {
+    "methods": 'Comparison of methods, SE1-SE4 (paper: "Statistics of Simulation Experiment" a-d)',
+    "scalability": 'Scalability with the number of MAVs (paper: "scalability and robustness" a)',
+    "commloss": 'Communication loss (paper: "scalability and robustness" b)',
+    "obstacles": 'Number of obstacles (paper: "Statistics of Simulation Experiment" e)',
+}
+TIMING_HEADING = "## Timing"
+
+
+def _cell(stat: Stat | None) -> str:
+    if stat is None:
+        return "n/a"
+    return f"{_fmt(stat.mean)} / {_fmt(stat.median)} ({_fmt(stat.iqr)})"
+
+
+def _durations_text(durations: Sequence[float]) -> str:
+    groups: list[list[float]] = []
+    for d in durations:
+        if groups and groups[-1][0] == d:
+            groups[-1].append(d)
+        else:
+            groups.append([d])
+    return ", ".join(f"{len(g)} x {_fmt(g[0])} s" for g in groups)
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A GitHub-flavoured markdown table; the first column left-aligned, the others right-aligned."""
+    lines = ["| " + " | ".join(header) + " |", "|:---|" + "---:|" * (len(header) - 1)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def family_table(summary: FamilySummary) -> str:
+    """The family's table: a row per metric, a column per condition; cells mean / median (IQR) over runs."""
+    conds = summary.conditions
+    rows = [["runs ok / failed", *(f"{c.runs_ok} / {c.runs_failed}" for c in conds)]]
+    rows += [[m, *(_cell(c.stat(m)) for c in conds)] for m in summary.metrics(timing=False)]
+    return markdown_table(["metric", *(c.condition.name for c in conds)], rows)
+
+
+def timing_table(summaries: Sequence[FamilySummary], results: Sequence[RunResult]) -> str:
+    """Per condition: the median over runs of each timing metric and the summed wall time of its runs."""
+    names = sorted({m for s in summaries for m in s.metrics(timing=True)})
+    rows = []
+    for s in summaries:
+        for c in s.conditions:
+            mine = [r for r in results if r.spec.family == s.family and r.spec.condition == c.condition]
+            cells = [_fmt(c.stat(m).median) if c.stat(m) else "n/a" for m in names]
+            rows.append([s.family, c.condition.name, *cells, f"{sum(r.wall_s for r in mine):.1f}"])
+    return markdown_table(["family", "condition", *(f"{m} (median)" for m in names), "wall time (s)"], rows)
+
+
+@dataclass(frozen=True)
+class ReportContext:
+    """What the report says about how it was made: the command (reproducible part only) and the base seed."""
+
+    command: str
+    base_seed: int
+    profile: str
+
+
+def render_report(
+    *,
+    context: ReportContext,
+    summaries: Sequence[FamilySummary],
+    results: Sequence[RunResult],
+    figures: Mapping[str, Sequence[str]],
+    wall_time_s: float,
+) -> str:
+    """The whole `report.md`. Everything above the timing section depends only on the runs' JSON reports."""
+    failed = [r for r in results if not r.ok]
+    lines = [
+        "# skyring experiments: the paper's simulation study, rerun",
+        "",
+        f"Command: `{context.command}` (profile: {context.profile}; base seed {context.base_seed}). "
+        "Every run is an independent process with its own seed derived from (base seed, family, condition, "
+        "run index); its JSON report is kept beside this file under `<family>/<condition>/run-NNN.json`. "
+        "The same command gives this "
+        f"report again, character for character, down to the `{TIMING_HEADING[3:]}` section.",
+        "",
+        "| family | conditions | runs per condition | durations |",
+        "|---|---|---|---|",
+    ]
+    for s in summaries:
+        p = s.protocol
+        lines.append(
+            f"| {p.family} | {', '.join(c.name for c in p.conditions)} | {p.runs} | "
+            f"{_durations_text(p.durations_s)} |"
+        )
+    lines += ["", f"Runs: {len(results)}, failed: {len(failed)}."]
+    for r in failed:
+        lines.append(
+            f"- failed: {r.spec.family} / {r.spec.condition.name} / run {r.spec.run_index} "
+            f"(seed {r.spec.seed}): {r.error}"
+        )
+    for s in summaries:
+        lines += [
+            "",
+            f"## {TITLES[s.family]}",
+            "",
+            "Each cell: mean / median (interquartile range) over the condition's runs of the per-run value.",
+            "",
+            family_table(s),
+            "",
+        ]
+        for fig in figures.get(s.family, ()):
+            lines.append(f"![{s.family}]({fig})")
+        lines += ["", "The paper's claims against our numbers:", ""]
+        for c in check_claims(s):
+            lines.append(f"- **{c.verdict}**: {c.claim} Ours: {c.evidence}.")
+    lines += [
+        "",
+        TIMING_HEADING,
+        "",
+        "Measured with a clock: these numbers change from run to run and machine to machine.",
+        "",
+        f"Total wall time: {wall_time_s:.1f} s.",
+        "",
+        timing_table(summaries, results),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def reproducible_part(report_md: str) -> str:
+    """The report without its timing section: what the same command must reproduce exactly."""
+    return report_md.split("\n" + TIMING_HEADING + "\n", 1)[0]

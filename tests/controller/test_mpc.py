@@ -1,0 +1,419 @@
+"""Specification of the MPC (controller/mpc.py): paper eqs. (4)-(9), METHOD.md "The MPC" and pitfall 1."""
+
+from __future__ import annotations
+
+import cvxpy as cp
+import numpy as np
+import pytest
+
+from controller.mpc import (
+    ModelPredictiveController,
+    MpcParams,
+    MpcSolution,
+    braking_plan,
+    predict,
+)
+
+PARAMS = MpcParams()
+N = PARAMS.horizon_steps
+STEPS = N + 1
+G = np.array([0.0, 0.0, -PARAMS.gravity_mps2])
+HOVER = np.array([0.0, 0.0, PARAMS.gravity_mps2])
+
+
+def solve(controller: ModelPredictiveController, **overrides) -> MpcSolution:
+    args = dict(
+        position_m=np.array([0.0, 0.0, 6.0]),
+        velocity_mps=np.zeros(3),
+        target_position_m=np.array([0.0, 0.0, 6.0]),
+        target_velocity_mps=np.zeros(3),
+        external_inputs_mps2=np.zeros((STEPS, 3)),
+    )
+    args.update(overrides)
+    return controller.solve(**args)
+
+
+def state_space_rollout(x0: np.ndarray, inputs: np.ndarray, external: np.ndarray, dt: float) -> np.ndarray:
+    """(M+1, 6) states by the matrix recursion of eq. (6) with A, B of eq. (9), written out independently."""
+    a = np.eye(6)
+    a[:3, 3:] = dt * np.eye(3)
+    b = np.vstack([0.5 * dt * dt * np.eye(3), dt * np.eye(3)])
+    states = [np.asarray(x0, dtype=float)]
+    for u, f in zip(inputs, external, strict=True):
+        states.append(a @ states[-1] + b @ (u + f + G))
+    return np.array(states)
+
+
+# ------------------------------------------------------------------------------------------ CVXPY reference
+def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The MPC's QP written from the equations with states as variables; returns (u, positions, velocities)."""
+    dt, m = params.dt_s, params.horizon_steps + 1
+    f = case["external_inputs_mps2"]
+    u = cp.Variable((m, 3))
+    p = cp.Variable((m + 1, 3))
+    v = cp.Variable((m + 1, 3))
+    s = cp.Variable(6)
+    acc = u + f + G
+    ones = np.ones((m, 1))
+    s_pos = ones @ cp.reshape(s[:3], (1, 3), order="C")
+    s_vel = ones @ cp.reshape(s[3:], (1, 3), order="C")
+    constraints = [
+        p[0] == case["position_m"],
+        v[0] == case["velocity_mps"],
+        p[1:] == p[:-1] + dt * v[:-1] + 0.5 * dt * dt * acc,
+        v[1:] == v[:-1] + dt * acc,
+        u >= ones @ np.atleast_2d(params.input_min_mps2),
+        u <= ones @ np.atleast_2d(params.input_max_mps2),
+        p[1:] <= ones @ np.atleast_2d(params.position_max_m) + s_pos,
+        p[1:] >= ones @ np.atleast_2d(params.position_min_m) - s_pos,
+        v[1:] <= ones @ np.atleast_2d(params.velocity_max_mps) + s_vel,
+        v[1:] >= ones @ np.atleast_2d(params.velocity_min_mps) - s_vel,
+        s >= 0,
+    ]
+    offset = {"hover": np.tile(G, (m, 1)), "planned": f + G, "raw": np.zeros((m, 3))}[params.effort]
+    cost = (
+        params.input_weight * cp.sum_squares(u + offset)
+        + cp.quad_form(p[m] - case["target_position_m"], case["terminal_position_weight"])
+        + cp.quad_form(v[m] - case["target_velocity_mps"], case["terminal_velocity_weight"])
+        + params.slack_weight * cp.sum(s)
+        + params.slack_quadratic_weight * cp.sum_squares(s)
+    )
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    problem.solve(solver=cp.CLARABEL, tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, tol_ktratio=1e-10)
+    assert problem.status == cp.OPTIMAL
+    return u.value, p.value, v.value
+
+
+def random_psd(rng: np.random.Generator) -> np.ndarray:
+    """A full symmetric PSD (3, 3) weight: random rotation, eigenvalues in [0, 200] (one may be near 0)."""
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    eig = rng.uniform(0.0, 200.0, 3)
+    eig[rng.integers(3)] *= rng.choice([1.0, 0.01])
+    return q @ np.diag(eig) @ q.T
+
+
+def formation_weight(rng: np.random.Generator) -> np.ndarray:
+    """The formation controller's kind of W_v: 100 I with a lowered weight along a horizontal tangent."""
+    angle = rng.uniform(0, 2 * np.pi)
+    t = np.array([-np.sin(angle), np.cos(angle), 0.0])
+    return 100.0 * np.eye(3) - rng.uniform(80.0, 100.0) * np.outer(t, t)
+
+
+def random_case(rng: np.random.Generator, kind: str) -> dict:
+    lo, hi = np.array(PARAMS.position_min_m), np.array(PARAMS.position_max_m)
+    position = rng.uniform(lo + 1.0, hi - 1.0)
+    velocity = rng.uniform(-2.0, 2.0, 3) * np.array([1.0, 1.0, 0.2])
+    target = rng.uniform(lo, hi)
+    external = np.tile(rng.normal(0.0, 1.0, 3) * np.array([1.0, 1.0, 0.2]), (STEPS, 1))
+    external += rng.normal(0.0, 0.3, (STEPS, 3))
+    wp, wv = random_psd(rng), random_psd(rng)
+    if kind == "position_bound":  # start at or beyond a face, moving outwards
+        axis, side = rng.integers(3), rng.choice([-1.0, 1.0])
+        face = hi[axis] if side > 0 else lo[axis]
+        position[axis] = face + side * rng.uniform(-1.0, 0.5)
+        velocity[axis] = side * (rng.uniform(2.0, 5.0) if axis < 2 else rng.uniform(0.2, 0.5))
+    elif kind == "velocity_bound":  # start faster than the velocity bounds
+        velocity = rng.uniform(5.5, 8.0, 3) * rng.choice([-1.0, 1.0], 3) * np.array([1.0, 1.0, 0.2])
+    elif kind == "far_target":  # saturates the inputs
+        direction = rng.normal(size=3)
+        target = position + rng.uniform(30.0, 60.0) * direction / np.linalg.norm(direction)
+    elif kind == "large_force":  # persistent force above the input authority
+        force = rng.normal(size=3) * np.array([1.0, 1.0, 0.3])
+        external = np.tile(rng.uniform(5.0, 20.0) * force / np.linalg.norm(force), (STEPS, 1))
+    elif kind == "formation":
+        wp, wv = 100.0 * np.eye(3), formation_weight(rng)
+    return dict(
+        position_m=position,
+        velocity_mps=velocity,
+        target_position_m=target,
+        target_velocity_mps=rng.normal(0.0, 1.0, 3) * np.array([1.0, 1.0, 0.0]),
+        external_inputs_mps2=external,
+        terminal_position_weight=wp,
+        terminal_velocity_weight=wv,
+    )
+
+
+KINDS = ("nominal", "position_bound", "velocity_bound", "far_target", "large_force", "formation")
+
+
+@pytest.fixture(scope="module")
+def compared() -> list[tuple[str, MpcSolution, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """60 seeded instances, 10 per kind, effort modes in turn; one controller per mode is reused, so the
+    solves also exercise warm starts from unrelated problems and terminal-weight updates."""
+    rng = np.random.default_rng(20261123)
+    modes = ("hover", "planned", "raw")
+    controllers = {mode: ModelPredictiveController(MpcParams(effort=mode)) for mode in modes}
+    results = []
+    for i in range(60):
+        mode = modes[i % 3]
+        case = random_case(rng, KINDS[i % len(KINDS)])
+        results.append((mode, controllers[mode].solve(**case), cvxpy_reference(MpcParams(effort=mode), case)))
+    return results
+
+
+def test_matches_cvxpy_inputs(compared):
+    errors = [np.max(np.abs(sol.inputs_mps2 - ref[0])) for _, sol, ref in compared]
+    assert all(sol.ok and sol.status == "solved" for _, sol, _ in compared)
+    assert max(errors) < 1e-3
+
+
+def test_matches_cvxpy_states(compared):
+    errors = [
+        max(np.max(np.abs(sol.positions_m - ref[1])), np.max(np.abs(sol.velocities_mps - ref[2])))
+        for _, sol, ref in compared
+    ]
+    assert max(errors) < 1e-3
+
+
+def test_reference_instances_include_active_state_bounds(compared):
+    active = [sol.max_state_violation > 0.01 for _, sol, _ in compared]
+    assert sum(active) >= 10
+
+
+def test_reference_instances_include_saturated_inputs(compared):
+    lo, hi = np.array(PARAMS.input_min_mps2), np.array(PARAMS.input_max_mps2)
+    saturated = [
+        np.any(np.isclose(sol.inputs_mps2, lo, atol=1e-6) | np.isclose(sol.inputs_mps2, hi, atol=1e-6))
+        for _, sol, _ in compared
+    ]
+    assert sum(saturated) >= 20
+
+
+def test_max_state_violation_matches_cvxpy_slack(compared):
+    """The reported violation is the reference plan's largest excursion beyond the soft bounds."""
+    state_min = np.concatenate([PARAMS.position_min_m, PARAMS.velocity_min_mps])
+    state_max = np.concatenate([PARAMS.position_max_m, PARAMS.velocity_max_mps])
+    for _, sol, (_, p, v) in compared:
+        states = np.hstack([p[1:], v[1:]])
+        excess = max(0.0, np.max(states - state_max), np.max(state_min - states))
+        assert sol.max_state_violation == pytest.approx(excess if excess > 1e-4 else 0.0, abs=1e-3)
+
+
+# ------------------------------------------------------------------------------------------- dynamics
+def test_predict_matches_state_space_recursion():
+    rng = np.random.default_rng(1)
+    x0 = rng.normal(size=6)
+    inputs, external = rng.normal(size=(STEPS, 3)), rng.normal(size=(STEPS, 3))
+    positions, velocities = predict(
+        position_m=x0[:3], velocity_mps=x0[3:], inputs_mps2=inputs, external_inputs_mps2=external, params=PARAMS
+    )
+    expected = state_space_rollout(x0, inputs, external, PARAMS.dt_s)
+    np.testing.assert_allclose(np.hstack([positions, velocities]), expected, atol=1e-12)
+
+
+def test_plan_obeys_dynamics():
+    controller = ModelPredictiveController(PARAMS)
+    external = np.tile([1.0, -0.5, 0.0], (STEPS, 1))
+    sol = solve(
+        controller,
+        position_m=np.array([3.0, -2.0, 5.0]),
+        velocity_mps=np.array([1.0, 0.5, 0.1]),
+        target_position_m=np.array([-4.0, 6.0, 8.0]),
+        external_inputs_mps2=external,
+    )
+    expected = state_space_rollout(np.array([3.0, -2.0, 5.0, 1.0, 0.5, 0.1]), sol.inputs_mps2, external, 0.1)
+    assert sol.ok
+    np.testing.assert_allclose(np.hstack([sol.positions_m, sol.velocities_mps]), expected, atol=1e-9)
+
+
+def test_plan_shapes_and_initial_state():
+    sol = solve(ModelPredictiveController(PARAMS), position_m=np.array([1.0, 2.0, 4.0]))
+    assert sol.inputs_mps2.shape == (N + 1, 3)
+    assert sol.positions_m.shape == sol.velocities_mps.shape == (N + 2, 3)
+    np.testing.assert_array_equal(sol.positions_m[0], [1.0, 2.0, 4.0])
+
+
+# ------------------------------------------------------------------------------------------- effort modes
+def test_hover_costs_nothing_in_hover_mode():
+    sol = solve(ModelPredictiveController(PARAMS))
+    assert sol.ok
+    np.testing.assert_allclose(sol.inputs_mps2, np.tile(HOVER, (STEPS, 1)), atol=1e-4)
+    np.testing.assert_allclose(sol.positions_m, np.tile([0.0, 0.0, 6.0], (N + 2, 1)), atol=1e-4)
+    np.testing.assert_allclose(sol.velocities_mps, 0.0, atol=1e-4)
+    assert sol.max_state_violation == 0.0
+
+
+def test_raw_effort_pulls_the_plan_down():
+    """The paper's literal u^T W_E u prices the hover thrust itself, so the plan sinks below the target."""
+    sol = solve(ModelPredictiveController(MpcParams(effort="raw")))
+    assert sol.ok
+    assert sol.inputs_mps2[0, 2] < PARAMS.gravity_mps2 - 1.0
+    assert sol.positions_m[-1, 2] < 6.0 - 0.05
+
+
+def test_planned_effort_cancels_a_force_within_input_authority():
+    force = np.array([1.5, -1.0, 0.0])
+    sol = solve(ModelPredictiveController(MpcParams(effort="planned")), external_inputs_mps2=np.tile(force, (STEPS, 1)))
+    assert sol.ok
+    np.testing.assert_allclose(sol.inputs_mps2, np.tile(HOVER - force, (STEPS, 1)), atol=1e-4)
+    np.testing.assert_allclose(sol.positions_m, np.tile([0.0, 0.0, 6.0], (N + 2, 1)), atol=1e-4)
+
+
+def test_hover_effort_lets_a_force_move_the_plan():
+    """In hover mode f is a free acceleration: only partly cancelled, so the plan drifts along it."""
+    sol = solve(ModelPredictiveController(PARAMS), external_inputs_mps2=np.tile([1.0, 0.0, 0.0], (STEPS, 1)))
+    assert sol.ok
+    assert -1.0 + 0.05 < sol.inputs_mps2[0, 0] < -0.05
+    assert sol.positions_m[-1, 0] > 0.05
+
+
+# ------------------------------------------------------------------------------------------- robustness
+def test_persistent_huge_force_gives_bounded_slack():
+    """f = 20 m/s^2 east over the whole horizon: braking at -3 leaves 17 m/s^2, so after 1.6 s the velocity
+    is 1 + 1.6 * 17 = 28.2 m/s, 23.2 m/s over the bound; the plan must be exactly that, not garbage."""
+    sol = solve(
+        ModelPredictiveController(PARAMS),
+        velocity_mps=np.array([1.0, 0.0, 0.0]),
+        target_position_m=np.array([5.0, 3.0, 8.0]),
+        external_inputs_mps2=np.tile([20.0, 0.0, 0.0], (STEPS, 1)),
+    )
+    assert sol.ok and sol.status == "solved"
+    assert sol.max_state_violation == pytest.approx(23.2, abs=1e-3)
+    np.testing.assert_allclose(sol.inputs_mps2[:, 0], -3.0, atol=1e-4)
+    assert np.all(np.isfinite(sol.positions_m)) and np.max(np.abs(sol.positions_m)) < 30.0
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "position_m",
+        "velocity_mps",
+        "target_position_m",
+        "target_velocity_mps",
+        "external_inputs_mps2",
+        "terminal_position_weight",
+        "terminal_velocity_weight",
+    ],
+)
+def test_non_finite_argument_gives_not_ok_with_message(name):
+    bad = {
+        "external_inputs_mps2": np.zeros((STEPS, 3)),
+        "terminal_position_weight": 100.0 * np.eye(3),
+        "terminal_velocity_weight": 100.0 * np.eye(3),
+    }.get(name, np.zeros(3))
+    bad = bad.copy()
+    bad.flat[-1] = np.nan if name.startswith("terminal") or name == "position_m" else np.inf
+    sol = solve(ModelPredictiveController(PARAMS), **{name: bad})
+    assert not sol.ok
+    assert sol.status == "invalid_input"
+    assert name in sol.message
+
+
+def test_controller_solves_normally_after_invalid_input():
+    controller = ModelPredictiveController(PARAMS)
+    rejected = solve(controller, position_m=np.array([np.nan, 0.0, 6.0]))
+    sol = solve(controller)
+    assert not rejected.ok and sol.ok
+    np.testing.assert_allclose(sol.inputs_mps2, np.tile(HOVER, (STEPS, 1)), atol=1e-4)
+
+
+def test_indefinite_terminal_weight_is_rejected():
+    sol = solve(ModelPredictiveController(PARAMS), terminal_velocity_weight=np.diag([100.0, 100.0, -1.0]))
+    assert not sol.ok
+    assert "positive semidefinite" in sol.message
+
+
+def test_asymmetric_terminal_weight_is_rejected():
+    weight = 100.0 * np.eye(3)
+    weight[0, 1] = 5.0
+    sol = solve(ModelPredictiveController(PARAMS), terminal_position_weight=weight)
+    assert not sol.ok
+    assert "symmetric" in sol.message
+
+
+def test_wrong_shape_raises_value_error():
+    with pytest.raises(ValueError, match="external_inputs_mps2"):
+        solve(ModelPredictiveController(PARAMS), external_inputs_mps2=np.zeros((N, 3)))
+
+
+def test_solver_failure_is_not_ok_and_carries_no_numbers():
+    params = MpcParams(max_iterations=10, polishing=False, accept_inaccurate=False)
+    sol = solve(ModelPredictiveController(params), target_position_m=np.array([15.0, -12.0, 9.0]))
+    assert not sol.ok
+    assert sol.status == "maximum iterations reached"
+    assert "OSQP" in sol.message and sol.iterations == 10
+    assert np.all(np.isnan(sol.inputs_mps2)) and np.all(np.isnan(sol.positions_m))
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"effort": "thrust"},
+        {"horizon_steps": 0},
+        {"dt_s": 0.0},
+        {"position_min_m": (-20.0, -20.0, 11.0)},
+        {"input_weight": 0.0},
+        {"slack_weight": -1.0},
+    ],
+)
+def test_invalid_params_raise(overrides):
+    with pytest.raises(ValueError):
+        MpcParams(**overrides)
+
+
+# ------------------------------------------------------------------------------------------- warm start
+@pytest.mark.parametrize("kind", ["nominal", "position_bound", "large_force"])
+def test_second_identical_solve_needs_no_more_iterations(kind):
+    case = random_case(np.random.default_rng(7), kind)
+    controller = ModelPredictiveController(PARAMS)
+    first = controller.solve(**case)
+    second = controller.solve(**case)
+    assert first.ok and second.ok
+    assert second.iterations <= first.iterations
+
+
+def test_reset_makes_the_next_solves_those_of_a_fresh_controller():
+    rng = np.random.default_rng(3)
+    cases = [random_case(rng, kind) for kind in ("nominal", "formation")]
+    fresh = ModelPredictiveController(PARAMS)
+    expected = [fresh.solve(**case) for case in cases]
+    used = ModelPredictiveController(PARAMS)
+    used.solve(**random_case(rng, "large_force"))
+    used.reset()
+    again = [used.solve(**case) for case in cases]
+    assert [s.iterations for s in again] == [s.iterations for s in expected]
+    for a, b in zip(again, expected, strict=True):
+        np.testing.assert_array_equal(a.inputs_mps2, b.inputs_mps2)
+
+
+# ------------------------------------------------------------------------------------------- braking
+def brake(position, velocity) -> tuple[np.ndarray, np.ndarray]:
+    return braking_plan(position_m=np.asarray(position, float), velocity_mps=np.asarray(velocity, float), params=PARAMS)
+
+
+def test_braking_plan_comes_to_rest_and_holds():
+    positions, velocities = brake([0.0, 0.0, 5.0], [4.0, -3.0, 0.4])
+    assert positions.shape == velocities.shape == (N + 2, 3)
+    assert np.all(np.diff(np.abs(velocities), axis=0) <= 1e-12)
+    np.testing.assert_allclose(velocities[-4:], 0.0, atol=1e-12)
+    np.testing.assert_allclose(positions[-4:], np.tile(positions[-1], (4, 1)), atol=1e-12)
+
+
+def test_braking_plan_decelerates_at_the_input_bound():
+    """vx = 4 m/s needs 1.33 s at 3 m/s^2: the first steps brake at exactly the bound."""
+    _, velocities = brake([0.0, 0.0, 5.0], [4.0, -3.0, 0.0])
+    acc = np.diff(velocities, axis=0) / PARAMS.dt_s
+    np.testing.assert_allclose(acc[:9, 0], -3.0, atol=1e-9)
+    np.testing.assert_allclose(acc[:9, 1], 3.0, atol=1e-9)
+
+
+def test_braking_plan_respects_input_bounds():
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        _, velocities = brake(rng.uniform(-15, 15, 3) + [0, 0, 20], rng.normal(0.0, 4.0, 3))
+        inputs = np.diff(velocities, axis=0) / PARAMS.dt_s - G
+        assert np.all(inputs >= np.array(PARAMS.input_min_mps2) - 1e-9)
+        assert np.all(inputs <= np.array(PARAMS.input_max_mps2) + 1e-9)
+
+
+def test_braking_plan_is_finite_for_finite_input():
+    rng = np.random.default_rng(12)
+    for _ in range(20):
+        positions, velocities = brake(rng.normal(0.0, 1e3, 3), rng.normal(0.0, 1e3, 3))
+        assert np.all(np.isfinite(positions)) and np.all(np.isfinite(velocities))
+
+
+def test_braking_plan_clips_positions_into_bounds():
+    positions, _ = brake([19.5, 0.0, 3.2], [5.0, 0.0, -0.5])
+    assert np.max(positions[:, 0]) == pytest.approx(20.0)
+    assert np.min(positions[:, 2]) >= 3.0

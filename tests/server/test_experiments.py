@@ -1,0 +1,253 @@
+"""`skyring experiment`: protocol, seeds, statistics, claims, figures, and the paper's orderings on real runs.
+
+The unit tests use hand-made metric values; the acceptance tests run the real simulator in worker processes:
+`skyring experiment all --quick` twice through the real command line, and a larger fixed-seed profile (stated in
+`ORDERING_PROFILE`) on which the paper's orderings must hold.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from server import experiment_report as rep
+from server import experiments as exp
+from server import figures
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+# ---- protocol ---------------------------------------------------------------------------------------------------
+
+def test_methods_protocol_is_se1_to_se4_with_5_mavs_and_30_runs_of_120_and_180_s():
+    p = exp.paper_protocol("methods")
+    methods = [dict(c.settings)["method"] for c in p.conditions]
+    assert methods == ["price", "dqmpc", "active", "active"]
+    assert [dict(c.settings)["trees"] for c in p.conditions] == ["none", "none", "none", "paper"]
+    assert {dict(c.settings)["vehicles"] for c in p.conditions} == {5}
+    assert p.durations_s == (120.0,) * 10 + (180.0,) * 20
+
+
+def test_scalability_protocol_sweeps_3_to_16_mavs_with_trees_10_runs_each():
+    p = exp.paper_protocol("scalability")
+    assert [dict(c.settings)["vehicles"] for c in p.conditions] == list(range(3, 17))
+    assert {dict(c.settings)["trees"] for c in p.conditions} == {"paper"}
+    assert p.runs == 10
+
+
+def test_commloss_protocol_sweeps_the_papers_loss_levels_with_8_mavs_3_runs_each():
+    p = exp.paper_protocol("commloss")
+    losses = [dict(c.settings)["comm_loss"] for c in p.conditions]
+    assert losses == pytest.approx([0.0, 0.10, 0.25, 0.50, 0.75, 0.90, 1.0], abs=1e-12)
+    assert {dict(c.settings)["vehicles"] for c in p.conditions} == {8}
+    assert p.runs == 3
+
+
+def test_obstacles_protocol_sweeps_0_to_20_obstacles_with_5_mavs_5_runs_of_180_s():
+    p = exp.paper_protocol("obstacles")
+    assert [c.x for c in p.conditions] == [0.0, 5.0, 10.0, 15.0, 20.0]
+    assert [dict(c.settings)["trees"] for c in p.conditions] == ["none", 5, 10, 15, 20]
+    assert {dict(c.settings)["vehicles"] for c in p.conditions} == {5}
+    assert p.durations_s == (180.0,) * 5
+
+
+def test_quick_profile_keeps_every_family_with_fewer_conditions_and_short_runs():
+    for family in exp.FAMILIES:
+        quick, paper = exp.quick_protocol(family), exp.paper_protocol(family)
+        assert 2 <= len(quick.conditions) <= len(paper.conditions)
+        assert sum(quick.durations_s) * len(quick.conditions) < 0.1 * sum(paper.durations_s) * len(paper.conditions)
+
+
+def test_run_override_keeps_the_papers_mix_of_short_and_long_runs():
+    p = exp.with_overrides(exp.paper_protocol("methods"), exp.ProfileOverrides(runs=3))
+    assert p.durations_s == (120.0, 180.0, 180.0)
+
+
+def test_duration_override_applies_to_every_run():
+    p = exp.with_overrides(exp.paper_protocol("methods"), exp.ProfileOverrides(runs=4, duration_s=12.5))
+    assert p.durations_s == (12.5,) * 4
+
+
+@pytest.mark.parametrize("overrides", [exp.ProfileOverrides(runs=0), exp.ProfileOverrides(duration_s=-1.0),
+                                       exp.ProfileOverrides(duration_s=math.nan)])
+def test_bad_overrides_are_refused_with_a_message(overrides):
+    with pytest.raises(ValueError, match="runs|duration"):
+        exp.with_overrides(exp.paper_protocol("methods"), overrides)
+
+
+def test_unknown_family_is_refused_naming_the_choices():
+    with pytest.raises(ValueError, match="methods, scalability, commloss, obstacles"):
+        exp.select_families("wind")
+
+
+def test_all_selects_the_four_families_in_the_papers_order():
+    assert exp.select_families("all") == ("methods", "scalability", "commloss", "obstacles")
+
+
+# ---- seeds ------------------------------------------------------------------------------------------------------
+
+def test_every_run_of_the_full_protocol_gets_its_own_seed():
+    specs = exp.plan_runs([exp.paper_protocol(f) for f in exp.FAMILIES], base_seed=7)
+    assert len({s.seed for s in specs}) == len(specs) == 4 * 30 + 14 * 10 + 7 * 3 + 5 * 5
+
+
+def test_a_runs_seed_does_not_depend_on_which_other_families_are_planned():
+    alone = exp.plan_runs([exp.paper_protocol("commloss")], base_seed=3)
+    together = [s for s in exp.plan_runs([exp.paper_protocol(f) for f in exp.FAMILIES], base_seed=3)
+                if s.family == "commloss"]
+    assert [s.seed for s in alone] == [s.seed for s in together]
+
+
+def test_base_seed_changes_every_derived_seed():
+    a = exp.plan_runs([exp.quick_protocol("methods")], base_seed=0)
+    b = exp.plan_runs([exp.quick_protocol("methods")], base_seed=1)
+    assert all(x.seed != y.seed for x, y in zip(a, b, strict=True))
+
+
+def test_derived_seed_is_a_pure_function_of_its_inputs():
+    kw = {"base_seed": 11, "family": "methods", "condition": "SE3 active", "run_index": 4}
+    assert exp.derive_seed(**kw) == exp.derive_seed(**kw)
+    assert exp.derive_seed(**kw) != exp.derive_seed(**{**kw, "run_index": 5})
+
+
+def test_run_files_are_laid_out_by_family_condition_and_run_index():
+    spec = exp.plan_runs([exp.quick_protocol("commloss")], base_seed=0)[3]
+    assert spec.relative_path() == Path("commloss/25-loss/run-001.json")
+
+
+# ---- statistics -------------------------------------------------------------------------------------------------
+
+def test_describe_ignores_non_finite_values_and_gives_quartiles():
+    s = rep.describe([4.0, 1.0, math.nan, 3.0, 2.0, math.inf])
+    assert s.n == 4
+    assert (s.mean, s.median, s.q25, s.q75) == pytest.approx((2.5, 2.5, 1.75, 3.25), abs=1e-12)
+    assert s.iqr == pytest.approx(1.5, abs=1e-12)
+    assert s.std == pytest.approx(np.std([1, 2, 3, 4], ddof=1), abs=1e-12)
+
+
+def test_describe_of_no_finite_value_is_none():
+    assert rep.describe([math.nan, None]) is None
+
+
+def test_flatten_names_nested_metrics_with_dots_and_drops_non_numbers():
+    flat = rep.flatten({"tracking_error_m": {"mean": 1, "p90": 2.5}, "min_obstacle_clearance_m": None,
+                        "in_frame_fraction": 0.5})
+    assert flat == {"tracking_error_m.mean": 1.0, "tracking_error_m.p90": 2.5, "in_frame_fraction": 0.5}
+
+
+def test_timing_metrics_are_told_apart_from_results():
+    assert rep.is_timing("tick_ms.p99") and rep.is_timing("realtime_factor")
+    assert not rep.is_timing("tracking_error_m.mean")
+
+
+# ---- claims, on hand-made runs ----------------------------------------------------------------------------------
+
+def _fake_results(protocol: exp.Protocol, metrics_of) -> list[exp.RunResult]:
+    """A result per run of `protocol` with the metrics `metrics_of(condition, run_index)` returns."""
+    return [exp.RunResult(spec=s, report={"config": {}, "metrics": metrics_of(s.condition, s.run_index)})
+            for s in exp.plan_runs([protocol], base_seed=0)]
+
+
+def _metrics(error: float, cov: float = 1.0, in_frame: float = 0.95) -> dict:
+    return {"tracking_error_m": {"mean": error}, "cov_trace_m2": {"mean": cov}, "in_frame_fraction": in_frame,
+            "center_offset_px": {"mean": 100.0}, "tick_ms": {"median": 1.0}}
+
+
+def _verdicts(protocol: exp.Protocol, metrics_of) -> list[bool | None]:
+    return [c.agrees for c in rep.check_claims(rep.summarize(protocol, _fake_results(protocol, metrics_of)))]
+
+
+def test_methods_claims_agree_when_active_has_the_lowest_uncertainty_and_keeps_the_person_in_frame():
+    cov = {"price": 2.0, "dqmpc": 1.5, "active": 0.5}
+    verdicts = _verdicts(exp.quick_protocol("methods"),
+                         lambda c, i: _metrics(error=cov[dict(c.settings)["method"]],
+                                               cov=cov[dict(c.settings)["method"]] + 0.01 * i))
+    assert verdicts == [True, True, True, True]
+
+
+def test_methods_uncertainty_claim_fails_when_dqmpc_beats_active():
+    cov = {"price": 2.0, "dqmpc": 0.4, "active": 0.5}
+    verdicts = _verdicts(exp.quick_protocol("methods"),
+                         lambda c, i: _metrics(error=1.0, cov=cov[dict(c.settings)["method"]]))
+    assert verdicts[0] is False
+
+
+def test_in_frame_claim_fails_below_90_percent():
+    verdicts = _verdicts(exp.quick_protocol("methods"), lambda c, i: _metrics(error=1.0, in_frame=0.89))
+    assert verdicts[2] is False
+
+
+def test_scalability_claim_agrees_when_error_falls_with_team_size():
+    p = exp.paper_protocol("scalability")
+    assert _verdicts(p, lambda c, i: _metrics(error=2.0 / math.sqrt(c.x))) == [True]
+
+
+def test_scalability_claim_fails_when_error_grows_with_team_size():
+    p = exp.paper_protocol("scalability")
+    assert _verdicts(p, lambda c, i: _metrics(error=0.1 * c.x)) == [False]
+
+
+def test_commloss_claim_agrees_within_20_percent_at_25_percent_loss():
+    p = exp.quick_protocol("commloss")
+    assert _verdicts(p, lambda c, i: _metrics(error=1.0 + 0.0076 * c.x)) == [True, True]  # x=25: 1.19
+
+
+def test_commloss_claim_fails_beyond_20_percent_at_25_percent_loss():
+    p = exp.quick_protocol("commloss")
+    assert _verdicts(p, lambda c, i: _metrics(error=1.0 + 0.0084 * c.x))[0] is False  # x=25: 1.21
+
+
+def test_obstacles_claim_fails_when_the_error_doubles():
+    p = exp.quick_protocol("obstacles")
+    assert _verdicts(p, lambda c, i: _metrics(error=1.0 + c.x / 20.0)) == [False]
+
+
+def test_claims_are_not_judged_when_their_conditions_were_not_run():
+    p = exp.Protocol("commloss", exp.quick_protocol("commloss").conditions[2:], (10.0,))
+    assert _verdicts(p, lambda c, i: _metrics(error=1.0)) == [None, None]
+
+
+def test_failed_runs_are_counted_and_left_out_of_the_statistics():
+    p = exp.quick_protocol("obstacles")
+    results = _fake_results(p, lambda c, i: _metrics(error=1.0 + i))
+    results[0] = exp.RunResult(spec=results[0].spec, report=None, error="RuntimeError: boom")
+    s = rep.summarize(p, results)
+    assert (s.conditions[0].runs_ok, s.conditions[0].runs_failed) == (1, 1)
+    assert s.conditions[0].stat(rep.ERROR).mean == pytest.approx(2.0, abs=1e-12)
+
+
+# ---- report and figures from hand-made runs ---------------------------------------------------------------------
+
+def _png_size(path: Path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path.name} is not a PNG"
+    assert data[12:16] == b"IHDR"
+    return struct.unpack(">II", data[16:24])
+
+
+def test_sweep_figure_is_a_png_of_the_configured_size(tmp_path):
+    p = exp.quick_protocol("scalability")
+    s = rep.summarize(p, _fake_results(p, lambda c, i: _metrics(error=1.0 / c.x + 0.01 * i)))
+    path = figures.sweep_figure(s, tmp_path)
+    w, h = _png_size(path)
+    assert (w, h) == (round(figures.FIGURE_SIZE_IN[0] * figures.DPI), round(figures.FIGURE_SIZE_IN[1] * figures.DPI))
+
+
+def test_report_puts_one_table_and_the_claims_under_each_family(tmp_path):
+    protocols = [exp.quick_protocol(f) for f in exp.FAMILIES]
+    results = [r for p in protocols for r in _fake_results(p, lambda c, i: _metrics(error=1.0 + 0.1 * i))]
+    summaries = [rep.summarize(p, results) for p in protocols]
+    text = rep.render_report(context=rep.ReportContext("skyring experiment all", 0, "test"), summaries=summaries,
+                             results=results, figures=figures.draw_all(summaries, tmp_path), wall_time_s=1.0)
+    sections = rep.reproducible_part(text).split("\n## ")[1:]
+    assert [s.split("\n")[0] for s in sections] == [rep.TITLES[f] for f in exp.FAMILIES]
+    for section, protocol in zip(sections, protocols, strict=True):
+        assert section.count("| metric |") == 1
+        assert len(rep.check_claims(rep.summarize(protocol, results))) == section.count("\n- **")

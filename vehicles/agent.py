@@ -1,0 +1,211 @@
+"""One MAV's onboard loop (DESIGN.md "One MAV's loop"), as a plain object driven by any runner.
+
+Per tick: fuse the MAV's own new detections and the teammates' received ones in its person-tracker replica,
+keep the teammates' latest horizon plans, run the formation controller on the MAV's own reported state, and
+return the set-point (position, velocity, yaw) plus the messages to broadcast (its plan at `plan_period_s`,
+its detections at once). No clocks, no I/O: the deterministic simulation and the live ground station drive the
+same `tick(now_s, inputs) -> outputs`.
+
+Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`. When the MAV knows fewer
+in-formation teammates than the roster says it has, it asks the controller for its roster slot bearing
+(`slot_bearing_rad`) as the terminal reference, so a team that cannot talk still spreads out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from controller.formation import FormationController
+from controller.messages import (
+    ControlOutput,
+    Detection,
+    HorizonPlan,
+    Obstacle,
+    PersonEstimate,
+    SolveStatus,
+    VehicleState,
+)
+from controller.params import ControllerParams, FormationParams
+from controller.tracker import PersonTracker, TrackerStats, Verdict
+from vehicles.autopilot import AutopilotState, Setpoint
+
+Message = Detection | HorizonPlan
+
+
+class AgentRole(str, Enum):
+    """What the mission wants from the agent this tick."""
+
+    FORMATION = "formation"  # fly: run the controller, send set-points, publish an in-formation plan
+    AIRBORNE = "airborne"  # in the air but not in formation (taking off, landing, paused): publish a hold plan
+    GROUND = "ground"  # on the ground: track only, publish no plan
+
+
+@dataclass(frozen=True)
+class AgentParams:
+    """plan_period_s: how often the plan is broadcast (10 Hz); teammate_timeout_s: a teammate's plan older
+    than this is forgotten (it is then neither avoided nor spaced around)."""
+
+    plan_period_s: float = 0.1
+    teammate_timeout_s: float = 3.0
+
+
+@dataclass(frozen=True, eq=False)
+class AgentInputs:
+    """One tick's inputs.
+
+    own: the autopilot's latest state (None before the first telemetry); detections: the MAV's own camera
+    detections since the last tick; received: teammates' messages delivered since the last tick; obstacles:
+    static and virtual; formation: the operator's d_des/h_des; role: see AgentRole; slot_bearing_rad: the ENU
+    bearing of this MAV's roster slot about the person (2 pi k / K), used when teammates are unheard;
+    slot_count: K, the number of MAVs the roster has in formation.
+    """
+
+    own: AutopilotState | None
+    detections: tuple[Detection, ...] = ()
+    received: tuple[Message, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
+    formation: FormationParams = field(default_factory=FormationParams)
+    role: AgentRole = AgentRole.FORMATION
+    slot_bearing_rad: float | None = None
+    slot_count: int = 1
+
+
+@dataclass(frozen=True)
+class AgentCounters:
+    """Cumulative counts: detections fused from the own camera and from teammates, plans received, messages
+    rejected (malformed, own echoes), controller exceptions caught, braking ticks, ticks that used the slot."""
+
+    own_detections_fused: int = 0
+    teammate_detections_fused: int = 0
+    plans_received: int = 0
+    rejected_messages: int = 0
+    controller_errors: int = 0
+    braking_ticks: int = 0
+    slot_ticks: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class AgentOutputs:
+    """One tick's results: setpoint for the autopilot (None unless role is FORMATION); control: the
+    controller's output; plan: the plan this MAV currently stands by (published or not); person: the fused
+    estimate now; outbox: messages to broadcast; fault: one line when something went wrong this tick."""
+
+    stamp_s: float
+    setpoint: Setpoint | None
+    control: ControlOutput | None
+    plan: HorizonPlan | None
+    person: PersonEstimate | None
+    outbox: tuple[Message, ...]
+    tracker: TrackerStats
+    counters: AgentCounters
+    teammates_known: int = 0
+    used_slot: bool = False
+    fault: str | None = None
+
+
+def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: bool = False) -> HorizonPlan:
+    """A plan that stays at the MAV's reported position (N+2 copies), for MAVs not under formation control."""
+    n = params.mpc.horizon_steps + 2
+    return HorizonPlan(vehicle_id=state.vehicle_id, stamp_s=state.stamp_s, dt_s=params.mpc.dt_s,
+                       positions_m=np.repeat(state.position_m[None, :], n, axis=0),
+                       velocities_mps=np.zeros((n, 3)), in_formation=in_formation,
+                       position_cov_m2=state.position_cov_m2)
+
+
+class Agent:
+    """The loop of MAV `vehicle_id`: a person-tracker replica, a formation controller, the teammates' plans."""
+
+    def __init__(self, *, vehicle_id: int, params: ControllerParams = ControllerParams(),
+                 agent_params: AgentParams = AgentParams()) -> None:
+        self.vehicle_id = int(vehicle_id)
+        self._params = params
+        self._ap = agent_params
+        self._tracker = PersonTracker(params.tracker)
+        self._controller = FormationController(vehicle_id=self.vehicle_id, params=params)
+        self._plans: dict[int, HorizonPlan] = {}
+        self._last_publish_s = -math.inf
+        self._counts = dict.fromkeys(AgentCounters.__dataclass_fields__, 0)
+
+    @property
+    def params(self) -> ControllerParams:
+        return self._params
+
+    def teammate_plans(self, now_s: float) -> tuple[HorizonPlan, ...]:
+        """The teammates' latest plans not older than teammate_timeout_s, by vehicle id."""
+        limit = now_s - self._ap.teammate_timeout_s
+        return tuple(p for _, p in sorted(self._plans.items()) if p.stamp_s >= limit)
+
+    def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
+        """Run one control tick at now_s."""
+        counts = self._counts
+        for msg in inputs.received:
+            self._receive(msg)
+        for det in inputs.detections:
+            if isinstance(det, Detection) and det.source_id == self.vehicle_id:
+                if self._tracker.update(det) in (Verdict.ACCEPTED, Verdict.RESET):
+                    counts["own_detections_fused"] += 1
+            else:
+                counts["rejected_messages"] += 1
+        person = self._tracker.estimate(now_s)
+        teammates = self.teammate_plans(now_s)
+        known = sum(1 for p in teammates if p.in_formation)
+        own = inputs.own
+        setpoint = control = plan = None
+        fault = None
+        used_slot = False
+        if own is not None and inputs.role == AgentRole.FORMATION:
+            used_slot = inputs.slot_bearing_rad is not None and known < inputs.slot_count - 1
+            try:
+                control = self._controller.step(
+                    now_s=now_s,
+                    own=VehicleState(vehicle_id=self.vehicle_id, stamp_s=now_s, position_m=own.position_m,
+                                     velocity_mps=own.velocity_mps, yaw_rad=own.yaw_rad,
+                                     position_cov_m2=own.position_cov_m2),
+                    person=person, teammates=teammates, obstacles=inputs.obstacles, formation=inputs.formation,
+                    in_formation=True, preferred_bearing_rad=inputs.slot_bearing_rad if used_slot else None)
+                setpoint = Setpoint(stamp_s=now_s, position_m=control.waypoint_position_m,
+                                    velocity_mps=control.waypoint_velocity_mps, yaw_rad=control.yaw_rad)
+                plan = control.plan
+                if control.status == SolveStatus.BRAKING:
+                    counts["braking_ticks"] += 1
+                    fault = control.fault
+            except Exception as exc:  # the loop must survive a controller bug: hold and report it
+                counts["controller_errors"] += 1
+                fault = f"controller error: {type(exc).__name__}: {exc}"
+                control = None
+                plan = hold_plan(state=own, params=self._params, in_formation=True)
+                setpoint = Setpoint(stamp_s=now_s, position_m=own.position_m, velocity_mps=(0.0, 0.0, 0.0),
+                                    yaw_rad=own.yaw_rad)
+            if used_slot:
+                counts["slot_ticks"] += 1
+        elif own is not None and inputs.role == AgentRole.AIRBORNE:
+            plan = hold_plan(state=own, params=self._params, in_formation=False)
+        outbox: list[Message] = [d for d in inputs.detections
+                                 if isinstance(d, Detection) and d.source_id == self.vehicle_id]
+        if plan is not None and now_s - self._last_publish_s >= self._ap.plan_period_s - 1e-9:
+            outbox.append(plan)
+            self._last_publish_s = now_s
+        return AgentOutputs(stamp_s=now_s, setpoint=setpoint, control=control, plan=plan, person=person,
+                            outbox=tuple(outbox), tracker=self._tracker.stats(),
+                            counters=AgentCounters(**counts), teammates_known=known, used_slot=used_slot,
+                            fault=fault)
+
+    def _receive(self, msg: object) -> None:
+        counts = self._counts
+        if isinstance(msg, Detection) and msg.source_id != self.vehicle_id:
+            if self._tracker.update(msg) in (Verdict.ACCEPTED, Verdict.RESET):
+                counts["teammate_detections_fused"] += 1
+        elif isinstance(msg, HorizonPlan) and msg.vehicle_id != self.vehicle_id:
+            if not (np.all(np.isfinite(msg.positions_m)) and np.isfinite(msg.stamp_s) and msg.dt_s > 0):
+                counts["rejected_messages"] += 1
+                return
+            counts["plans_received"] += 1
+            old = self._plans.get(msg.vehicle_id)
+            if old is None or msg.stamp_s >= old.stamp_s:
+                self._plans[msg.vehicle_id] = msg
+        else:
+            counts["rejected_messages"] += 1

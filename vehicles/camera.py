@@ -1,0 +1,161 @@
+"""The body-fixed camera of a MAV: pose, pinhole projection, and what it sees of the person.
+
+The camera is rigidly attached to the body, pitched `pitch_down_rad` below the body's forward axis and
+`offset_forward_m` ahead of its centre (paper Sec. II and its Gazebo set-up), so its view tilts with the body's
+roll and pitch and turns with its yaw. Image convention: u to the right, v down, pixel (0, 0) the top-left
+corner; camera frame x right, y down, z along the optical axis.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.messages import Obstacle
+
+
+@dataclass(frozen=True)
+class CameraParams:
+    """Paper intrinsics (2040 x 1086 px, fx = fy = 1470.33 px, principal point (1020.5, 543.5) px) and mount."""
+
+    width_px: int = 2040
+    height_px: int = 1086
+    fx_px: float = 1470.33
+    fy_px: float = 1470.33
+    cx_px: float = 1020.5
+    cy_px: float = 543.5
+    pitch_down_rad: float = math.radians(45.0)
+    offset_forward_m: float = 0.18
+
+    @property
+    def center_px(self) -> np.ndarray:
+        """(2,) the image centre (width/2, height/2), used for the centre-offset metric."""
+        return np.array([self.width_px / 2.0, self.height_px / 2.0])
+
+
+def body_rotation(*, yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0.0) -> np.ndarray:
+    """(3, 3) body-to-world rotation; columns are the body's forward, left and up axes in ENU.
+
+    yaw_rad: ENU heading; pitch_rad > 0 nose up and roll_rad > 0 right side down (the aviation sense, so the
+    numbers mean the same as PX4's): R = Rz(yaw) Ry(-pitch) Rx(roll) for forward-left-up body axes.
+    """
+    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
+    cp, sp = math.cos(-pitch_rad), math.sin(-pitch_rad)
+    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    return rz @ ry @ rx
+
+
+def attitude_from_acceleration(*, acceleration_mps2: np.ndarray, yaw_rad: float,
+                               gravity_mps2: float = 9.81) -> tuple[float, float]:
+    """(roll_rad, pitch_rad) of a multirotor whose thrust produces acceleration_mps2 (3,) at heading yaw_rad.
+
+    The thrust axis (body up) is along a + g z; inverting body_rotation's third column in the yaw frame gives
+    roll = -asin(n_left), pitch = -atan2(n_forward, n_up).
+    """
+    n = np.array([acceleration_mps2[0], acceleration_mps2[1], acceleration_mps2[2] + gravity_mps2])
+    norm = float(np.linalg.norm(n))
+    if norm < 1e-6:
+        return 0.0, 0.0
+    n /= norm
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    forward = c * n[0] + s * n[1]
+    left = -s * n[0] + c * n[1]
+    return -math.asin(max(-1.0, min(1.0, left))), -math.atan2(forward, n[2])
+
+
+@dataclass(frozen=True, eq=False)
+class CameraPose:
+    """position_m (3,) of the optical centre; rotation (3, 3) world-to-camera (rows: camera x, y, z in ENU)."""
+
+    position_m: np.ndarray
+    rotation: np.ndarray
+
+
+def camera_pose(*, body_position_m: np.ndarray, yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0.0,
+                params: CameraParams = CameraParams()) -> CameraPose:
+    """The camera's pose for a body at body_position_m (3,) with the given attitude."""
+    r_wb = body_rotation(yaw_rad=yaw_rad, pitch_rad=pitch_rad, roll_rad=roll_rad)
+    c, s = math.cos(params.pitch_down_rad), math.sin(params.pitch_down_rad)
+    # Camera axes in body (forward-left-up) coordinates: optical axis pitched down, image down, image right.
+    cam_in_body = np.array([[0.0, -1.0, 0.0], [-s, 0.0, -c], [c, 0.0, -s]])
+    rotation = cam_in_body @ r_wb.T
+    position = np.asarray(body_position_m, dtype=float) + r_wb[:, 0] * params.offset_forward_m
+    return CameraPose(position_m=position, rotation=rotation)
+
+
+def project(points_m: np.ndarray, pose: CameraPose, params: CameraParams = CameraParams()
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole projection of world points (M, 3): pixels (M, 2) and depth along the optical axis (M,).
+
+    Points behind the camera (depth <= 0) get NaN pixels.
+    """
+    pc = (np.asarray(points_m, dtype=float) - pose.position_m) @ pose.rotation.T
+    depth = pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        safe = np.where(depth > 1e-9, depth, np.nan)
+        u = params.fx_px * pc[:, 0] / safe + params.cx_px
+        v = params.fy_px * pc[:, 1] / safe + params.cy_px
+    return np.stack([u, v], axis=1), depth
+
+
+def inside_image(pixels: np.ndarray, params: CameraParams = CameraParams()) -> np.ndarray:
+    """(M,) bool: finite pixels (M, 2) inside [0, width] x [0, height]."""
+    u, v = pixels[:, 0], pixels[:, 1]
+    with np.errstate(invalid="ignore"):
+        return (np.isfinite(u) & np.isfinite(v) & (u >= 0.0) & (u <= params.width_px)
+                & (v >= 0.0) & (v <= params.height_px))
+
+
+def line_of_sight_clear(a_m: np.ndarray, b_m: np.ndarray, obstacles: tuple[Obstacle, ...]) -> bool:
+    """True when the segment a (3,) -> b (3,) passes no vertical cylinder below its top.
+
+    For each trunk the segment's horizontal closest approach to the axis is compared with the radius, at the
+    segment's height there (exact for the thin trunks of the arena, where the segment is nearly straight over
+    the trunk's width).
+    """
+    if not obstacles:
+        return True
+    centers = np.array([o.center_m for o in obstacles])
+    radii = np.array([o.radius_m for o in obstacles])
+    tops = np.array([o.height_m for o in obstacles])
+    d = b_m[:2] - a_m[:2]
+    dd = float(d @ d)
+    if dd < 1e-12:
+        t = np.zeros(len(obstacles))
+    else:
+        t = np.clip(((centers - a_m[:2]) @ d) / dd, 0.0, 1.0)
+    closest = a_m[:2] + t[:, None] * d
+    dist = np.hypot(closest[:, 0] - centers[:, 0], closest[:, 1] - centers[:, 1])
+    z = a_m[2] + t * (b_m[2] - a_m[2])
+    return not bool(np.any((dist < radii) & (z < tops)))
+
+
+@dataclass(frozen=True, eq=False)
+class FrameView:
+    """What one camera frame shows of the person.
+
+    in_frame: head and feet both project inside the image; visible: in_frame and no trunk blocks the line of
+    sight to the body centre; center_px (2,): the body centre's pixel (NaN when behind the camera);
+    center_offset_px: its distance from the image centre (NaN when behind the camera).
+    """
+
+    in_frame: bool
+    visible: bool
+    center_px: np.ndarray
+    center_offset_px: float
+
+
+def view_person(*, pose: CameraPose, center_m: np.ndarray, feet_m: np.ndarray, head_m: np.ndarray,
+                obstacles: tuple[Obstacle, ...], params: CameraParams = CameraParams()) -> FrameView:
+    """Project the person's centre, feet and head (each (3,)) and check the line of sight to the centre."""
+    pixels, _ = project(np.stack([center_m, feet_m, head_m]), pose, params)
+    inside = inside_image(pixels, params)
+    in_frame = bool(inside[1] and inside[2])
+    visible = in_frame and line_of_sight_clear(pose.position_m, np.asarray(center_m, dtype=float), obstacles)
+    offset = float(np.hypot(*(pixels[0] - params.center_px)))
+    return FrameView(in_frame=in_frame, visible=visible, center_px=pixels[0], center_offset_px=offset)

@@ -1,0 +1,52 @@
+"""The operator's page: one viser server with the 3-D scene and the control panel, fed with `SceneView`s.
+
+viser serves its own page and WebSocket on its own port from a daemon thread; `publish` may be called from
+any thread (the ground station calls it from its asyncio loop at about 10 Hz) and applies a whole frame
+atomically.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import viser
+
+from webui.panels import OperatorPanel
+from webui.scene import SceneRenderer
+from webui.view import OperatorActions, SceneView
+
+
+class OperatorUi:
+    """Owns the viser server, the scene renderer and the control panel.
+
+    host/port: where viser listens (port 0 picks a free port; a busy port makes viser take the next free one:
+    read `port` for the real one). sigma: size of the covariance ellipsoid in standard deviations.
+    """
+
+    def __init__(self, *, actions: OperatorActions, initial: SceneView, host: str = "127.0.0.1",
+                 port: int = 8080, sigma: float = 2.0) -> None:
+        self.server = viser.ViserServer(host=host, port=port, label="skyring ground station", verbose=False)
+        self.server.gui.configure_theme(control_width="large", show_share_button=False, show_logo=False,
+                                        dark_mode=False)
+        self.server.initial_camera.position = (0.0, -38.0, 30.0)
+        self.server.initial_camera.look_at = (0.0, 0.0, 2.0)
+        self.server.initial_camera.up = (0.0, 0.0, 1.0)
+        self._lock = threading.Lock()
+        self.scene = SceneRenderer(self.server.scene, sigma=sigma)
+        self.panel = OperatorPanel(self.server, actions, initial)
+        self.publish(initial)
+
+    @property
+    def port(self) -> int:
+        """The TCP port viser really listens on."""
+        return self.server.get_port()
+
+    def publish(self, view: SceneView) -> None:
+        """Draw `view` in every connected browser as one atomic update."""
+        with self._lock, self.server.atomic():
+            self.scene.draw(view)
+            self.panel.refresh(view)
+
+    def stop(self) -> None:
+        """Close viser's server and threads."""
+        self.server.stop()

@@ -1,0 +1,129 @@
+"""What the operator's view reads and what it may ask for.
+
+webui never imports server/: the ground station adapts its mission snapshot to these frozen view types and
+hands the UI an object satisfying `OperatorActions`. Units are SI, the frame is the team's local ENU world
+frame (x east, y north, z up, metres).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from controller.messages import Obstacle, PersonEstimate, frozen_array
+from controller.params import FormationParams
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleView:
+    """One MAV as the operator sees it.
+
+    position_m (3,) and yaw_rad (ENU) as reported by its autopilot; plan_positions_m (M, 3) its latest
+    horizon plan (M = 0 when none); phase: the mission's phase name (e.g. "formation", "landing", "landed");
+    mode: the autopilot flight mode name; link_age_s: seconds since its last telemetry (stale when
+    `link_stale`); solver_time_s: OSQP's time of the last solve (None before the first); battery_fraction in
+    [0, 1] or None when unknown.
+    """
+
+    vehicle_id: int
+    phase: str
+    mode: str
+    armed: bool
+    in_air: bool
+    in_formation: bool
+    position_m: np.ndarray
+    yaw_rad: float
+    link_age_s: float
+    link_stale: bool
+    solve_status: str = ""
+    solver_time_s: float | None = None
+    battery_fraction: float | None = None
+    plan_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_m", frozen_array(self.position_m, (3,), "position_m"))
+        object.__setattr__(self, "plan_positions_m",
+                           frozen_array(self.plan_positions_m, (-1, 3), "plan_positions_m"))
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """The on-board camera drawn as a frustum: vertical field of view, image aspect (width / height), downward
+    pitch and forward offset from the body centre (the paper's camera: 40.5 deg vertical, 2040 / 1086 px,
+    45 deg down, 0.18 m ahead)."""
+
+    vertical_fov_rad: float = float(2.0 * np.arctan(543.0 / 1470.33))
+    aspect: float = 2040.0 / 1086.0
+    pitch_down_rad: float = float(np.deg2rad(45.0))
+    forward_offset_m: float = 0.18
+
+
+@dataclass(frozen=True)
+class Range:
+    """A closed interval [low, high] an operator value must lie in (units of the value it bounds)."""
+
+    low: float
+    high: float
+
+
+@dataclass(frozen=True, eq=False)
+class SceneView:
+    """Everything drawn at one instant.
+
+    person_truth_m (3,): the simulated person's true body centre (None outside simulation); person_estimate:
+    the fused estimate drawn with its covariance ellipsoid (None before the first detection);
+    estimate_source_id: the MAV whose tracker replica it comes from; tracking_error_m: mean over MAVs of
+    |estimate - truth| (simulation only, else None); arena_min_m / arena_max_m (3,): the box the MAVs fly
+    in; d_des_range_m / h_des_range_m: what the operator may set (the same limits the ground station
+    enforces).
+    """
+
+    time_s: float
+    vehicles: tuple[VehicleView, ...]
+    obstacles: tuple[Obstacle, ...]
+    formation: FormationParams
+    formation_enabled: bool
+    arena_min_m: np.ndarray
+    arena_max_m: np.ndarray
+    d_des_range_m: Range
+    h_des_range_m: Range
+    person_truth_m: np.ndarray | None = None
+    person_estimate: PersonEstimate | None = None
+    estimate_source_id: int | None = None
+    tracking_error_m: float | None = None
+    camera: CameraView = field(default_factory=CameraView)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "arena_min_m", frozen_array(self.arena_min_m, (3,), "arena_min_m"))
+        object.__setattr__(self, "arena_max_m", frozen_array(self.arena_max_m, (3,), "arena_max_m"))
+        if self.person_truth_m is not None:
+            object.__setattr__(self, "person_truth_m", frozen_array(self.person_truth_m, (3,), "person_truth_m"))
+
+
+class OperatorActions(Protocol):
+    """The operator commands the UI may call. Each is validated before anything changes; a refusal raises
+    ValueError (or a subclass) whose message says what to do instead, and the UI shows it as a notification.
+    """
+
+    def set_formation(self, *, d_des_m: float, h_des_m: float) -> None:
+        """Set the desired horizontal distance and height above the person (m)."""
+
+    def add_obstacle(self, *, x_m: float, y_m: float, radius_m: float) -> str:
+        """Add a virtual obstacle (vertical cylinder) at ENU (x_m, y_m); returns its id."""
+
+    def remove_obstacle(self, obstacle_id: str) -> None:
+        """Remove a virtual obstacle by id."""
+
+    def land(self, vehicle_id: int) -> None:
+        """Land one MAV; it leaves formation control until released."""
+
+    def land_all(self) -> None:
+        """Land every MAV."""
+
+    def release(self, vehicle_id: int) -> None:
+        """Return a landed MAV to formation control (it takes off again)."""
+
+    def set_formation_enabled(self, enabled: bool) -> None:
+        """Start (True) or stop (False, hold position) formation control for the whole team."""
