@@ -87,6 +87,10 @@ class FieldParams:
     approach_max_mps2: float = 2.0
     dqmpc_d_min_m: float = 1.0
     dqmpc_d_max_m: float = 4.0
+    anticipate: bool = False
+    teammate_peak_mps2: float = 8.0
+    obstacle_peak_mps2: float = 8.0
+    person_peak_mps2: float = 8.0
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
@@ -319,8 +323,15 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
     return scalar[:, None] * _tangents(rel_xy, rho)
 
 
-def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, params: FieldParams,
-                     tie_sign: np.ndarray | float = 1.0, active: np.ndarray | None = None) -> np.ndarray:
+def peak_gain(peak, *, d_min, d_max, freeze_fraction: float):
+    """The gain G that makes the cotangential field equal `peak` at (and below) d_min."""
+    z0 = HALF_PI * freeze_fraction
+    return peak * (np.asarray(d_max, dtype=float) - d_min) / (HALF_PI * (1.0 / np.tan(z0) + z0 - HALF_PI))
+
+
+def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, peak: float, params: FieldParams,
+                     tie_sign: np.ndarray | float = 1.0, active: np.ndarray | None = None,
+                     anticipate: bool = False) -> np.ndarray:
     """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eqs. 14, 15), (N+1, 2).
 
     diff_xy (M, N+1, 2) from each obstacle to us, dist (M, N+1) the distance the thresholds apply to, d_min and
@@ -328,10 +339,13 @@ def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, par
     """
     if diff_xy.shape[0] == 0:
         return np.zeros(diff_xy.shape[1:])
-    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=params.gain,
+    gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
+    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain,
                                  freeze_fraction=params.freeze_fraction)
     if active is not None:
         mag = np.where(active, mag, 0.0)
+    if anticipate:
+        mag = np.maximum.accumulate(mag[:, ::-1], axis=1)[:, ::-1]
     norm = np.sqrt(np.einsum("...i,...i->...", diff_xy, diff_xy))
     return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)
 
@@ -403,7 +417,8 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
             d_max = np.maximum(teammates.d_max_m, d_min + 1e-3)[:, None]
         tie = np.where(own_id < teammates.vehicle_ids, -1.0, 1.0)[:, None]
         teammate = repulsion_inputs(diff_xy=diff, dist=dist, d_min=d_min, d_max=d_max, params=params,
-                                    tie_sign=tie)
+                                    peak=params.teammate_peak_mps2,
+                                    tie_sign=tie, anticipate=params.anticipate)
 
     if (terms.obstacles or terms.approach) and obstacles.count:
         diff = own_xy[None] - obstacles.centers_m[:, None, :]
@@ -416,6 +431,7 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
         below_top = own[None, :, 2] < obstacles.heights_m[:, None] + d_min
         if terms.obstacles:
             obstacle = repulsion_inputs(diff_xy=diff, dist=surface, d_min=d_min, d_max=d_max, params=params,
+                                        peak=params.obstacle_peak_mps2,
                                         active=below_top)
         if terms.approach and in_formation:
             near = below_top & (surface < params.approach_range_m)
@@ -427,7 +443,8 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
     if terms.person:
         lo, hi = params.person_d_min_fraction * d_des_m, params.person_d_max_fraction * d_des_m
         if hi > 0.0 and np.any(rho < hi):
-            person = repulsion_inputs(diff_xy=rel[None], dist=rho[None], d_min=lo, d_max=hi, params=params)
+            person = repulsion_inputs(diff_xy=rel[None], dist=rho[None], d_min=lo, d_max=hi, params=params,
+                                      peak=params.person_peak_mps2)
 
     total_xy = clamp_norm(tracking + teammate + obstacle + person + approach, params.f_max_mps2)
     fault = not bool(np.all(np.isfinite(total_xy)))

@@ -1,9 +1,15 @@
 """The detection measurement model (paper eqs. 1-3): spherical camera noise as a Cartesian covariance.
 
+Equation numbers count the numbered equations of the paper's source: eq. 1 `eqn:single_mav_model` (the
+converted covariance), eq. 2 `eq:covmodel` (its diagonal form under the paper's assumptions), eq. 3 `tracecov`
+(trace = kappa r^2).
+
 A detection is a range r, an azimuth (bearing) a and an elevation e of the person seen from the camera, in
-world-aligned spherical coordinates about the camera centre: x = r cos e cos a, y = r cos e sin a, z = r sin e
-(ENU). The paper's inclination theta is the polar angle, theta = pi/2 - e, so its noise is the elevation's noise.
-Noise (paper Sec. III-A): sigma_r = range_sigma_fraction * r (sigma_r^2 = C1 r^2), sigma_a^2 = C2, sigma_e^2 = C3.
+world-aligned spherical coordinates about the camera centre: x = r cos e cos a, y = r cos e sin a,
+z = r sin e (ENU). The paper's inclination theta is the polar angle, theta = pi/2 - e, so its noise is the
+elevation's noise. Noise (paper Sec. III-A): sigma_r = range_sigma_fraction * r (sigma_r^2 = C1 r^2),
+sigma_a^2 = C2, sigma_e^2 = C3. As in the paper, the angle noises are taken about world-aligned axes at the
+camera (the camera is yawed towards the person, so its image axes are close to them).
 
 Conversion to Cartesian uses the unbiased converted measurements of Mo, Song, Zhou, Sun and Bar-Shalom (IEEE
 TAES 34(3), 1998), the method the paper's eq. (1) cites: with lambda_a = exp(-sigma_a^2 / 2) and lambda_e =
@@ -23,11 +29,14 @@ and lambda'_a = lambda_a^4 = exp(-2 sigma_a^2), lambda'_e = lambda_e^4:
     R_xz = (1/(la le^2) - 1/la - la) r^2 c_a s_e c_e + s/2 la c_a le' sin 2e
     R_yz = (1/(la le^2) - 1/la - la) r^2 s_a s_e c_e + s/2 la s_a le' sin 2e
 
-(c_a = cos a, s_e = sin e, ...). We chose this form over the linearised J diag(...) J^T because it is the one the
-paper's eq. (1) uses, it stays correct for large angle noise, and it is a true conditional second moment, hence
-positive semi-definite by construction; a floor of COV_FLOOR_M2 on the diagonal makes it definite.
-For a level view (e = 0) and small angle noise it reduces to diag(C1, C2, C3) r^2 in the camera's
-range/cross/up axes, whose trace is the paper's kappa r^2 (eq. 3) with kappa = C1 + C2 + C3.
+(la = lambda_a, le = lambda_e, and r, a, e the measured r_m, a_m, e_m; c_a = cos a, s_e = sin e, ...;
+sigma_r is taken at r_m, the only range known). We chose this form over the linearised J diag(...) J^T
+because it is the one the paper's eq. (1) uses, it stays correct for large angle noise, and it is a true
+conditional second moment, hence positive semi-definite by construction; a floor of COV_FLOOR_M2 on the
+diagonal makes it definite.
+For a level view (e = 0) and small angle noise it is diagonal in the camera's range/cross/up axes with entries
+close to (C1, C2, C3) r^2 (eq. 2), and its trace is the paper's kappa r^2 (eq. 3), kappa = C1 + C2 + C3:
+exactly, the trace is (C1 + exp(C2 + C3) - 1) r^2 there.
 """
 
 from __future__ import annotations
@@ -66,7 +75,8 @@ class NoiseParams:
 
 
 def paper_trace_m2(*, range_m: float, noise: NoiseParams) -> float:
-    """Trace of a detection's covariance under the paper's assumptions (level view, small noise): kappa r^2."""
+    """Trace of a detection's covariance under the paper's assumptions (level view, small noise), eq. (3):
+    kappa r^2 in m^2."""
     return noise.kappa * float(range_m) ** 2
 
 
@@ -111,8 +121,8 @@ def _point(name: str, value) -> np.ndarray:
 def spherical_covariance(*, camera_position_m, target_position_m, noise: NoiseParams) -> np.ndarray:
     """(3, 3) Cartesian covariance (m^2) of a detection of target_position_m (3,) from camera_position_m (3,).
 
-    Paper eq. (1): the unbiased converted-measurement covariance (module docstring) evaluated at this geometry.
-    Symmetric positive definite.
+    Paper eq. (1): the unbiased converted-measurement covariance (module docstring) evaluated at this
+    geometry. Symmetric positive definite.
     """
     offset = _point("target_position_m", target_position_m) - _point("camera_position_m", camera_position_m)
     return _converted_covariance(*_spherical(offset), noise)
@@ -124,8 +134,8 @@ def sample_detection(
     """Draw one noisy detection: (position_m (3,), cov_m2 (3, 3)).
 
     Range, azimuth and elevation get independent Gaussian noise (sigma_r from the true range), the measured
-    point is converted with the unbiased (debiased) conversion, and the covariance is evaluated at the MEASURED
-    point, as a real system that does not know the truth would.
+    point is converted with the unbiased (debiased) conversion, and the covariance is evaluated at the
+    MEASURED point, as a real system that does not know the truth would.
     """
     camera = _point("camera_position_m", camera_position_m)
     r, az, el = _spherical(_point("target_position_m", target_position_m) - camera)
@@ -136,7 +146,8 @@ def sample_detection(
     la = np.exp(-0.5 * noise.bearing_sigma_rad**2)
     le = np.exp(-0.5 * noise.inclination_sigma_rad**2)
     horizontal = r_m * np.cos(el_m) / (la * le)
-    position = camera + np.array([horizontal * np.cos(az_m), horizontal * np.sin(az_m), r_m * np.sin(el_m) / le])
+    offset = np.array([horizontal * np.cos(az_m), horizontal * np.sin(az_m), r_m * np.sin(el_m) / le])
+    position = camera + offset
     return position, _converted_covariance(r_m, az_m, el_m, noise)
 
 
@@ -149,17 +160,21 @@ def fuse_covariances(covs: Sequence[np.ndarray]) -> np.ndarray:
     """
     if len(covs) == 0:
         raise ValueError("fuse_covariances needs at least one covariance")
-    information = np.zeros((3, 3))
-    eye = np.eye(3)
-    for i, cov in enumerate(covs):
-        c = np.asarray(cov, dtype=float)
-        if c.shape != (3, 3) or not np.all(np.isfinite(c)) or not np.allclose(c, c.T, rtol=1e-9, atol=1e-12):
-            raise ValueError(f"covariance {i} must be a finite symmetric (3, 3) matrix")
-        try:
-            chol = np.linalg.cholesky(c)
-        except np.linalg.LinAlgError as exc:
-            raise ValueError(f"covariance {i} is not positive definite") from exc
-        inv_chol = np.linalg.solve(chol, eye)
-        information += inv_chol.T @ inv_chol
+    try:
+        stack = np.array([np.asarray(c, dtype=float) for c in covs])
+    except ValueError as exc:
+        raise ValueError("every covariance must be a (3, 3) matrix") from exc
+    if stack.shape[1:] != (3, 3) or not np.all(np.isfinite(stack)):
+        raise ValueError("every covariance must be a finite (3, 3) matrix")
+    asymmetry = np.abs(stack - stack.transpose(0, 2, 1)).max(axis=(1, 2))
+    asymmetric = asymmetry > 1e-9 * np.abs(stack).max(axis=(1, 2))
+    if np.any(asymmetric):
+        raise ValueError(f"covariance {int(np.argmax(asymmetric))} is not symmetric")
+    try:
+        chol = np.linalg.cholesky(stack)
+    except np.linalg.LinAlgError as exc:
+        raise ValueError("a covariance is not positive definite") from exc
+    inv_chol = np.linalg.inv(chol)
+    information = np.einsum("kji,kjl->il", inv_chol, inv_chol)  # sum_k L_k^-T L_k^-1
     fused = np.linalg.inv(information)
     return 0.5 * (fused + fused.T)

@@ -1,9 +1,9 @@
 """The convex MPC of one MAV (paper Sec. III-D: cost `J_ACT` eq. (4), problem eq. (5), dynamics eq. (6), state
-and input bounds eqs. (7)-(8), A and B eq. (9); numbers as in the RA-L text's order), solved with OSQP.
+and input bounds eqs. (7)-(8), A and B eq. (9); numbered in the order of the RA-L text), solved with OSQP.
 
-Variables z = [u(0..N) (N+1, 3) | x(1..N+1) (N+1, 6) | s (6,)], x = [position, velocity] in ENU:
+The QP, with x(n) = [position, velocity] (6,) in ENU and W_E = input_weight * I3:
 
-    minimise   sum_n (u(n) + c(n))^T W_E (u(n) + c(n))                          (effort, eq. 4)
+    minimise   sum_{n=0..N} (u(n) + c(n))^T W_E (u(n) + c(n))                   (effort, eq. 4)
              + (p(N+1) - p_ref)^T W_p (p(N+1) - p_ref)
              + (v(N+1) - v_ref)^T W_v (v(N+1) - v_ref)                            (terminal, eq. 4)
              + slack_weight * sum(s) + slack_quadratic_weight * s^T s              (soft state bounds)
@@ -11,14 +11,23 @@ Variables z = [u(0..N) (N+1, 3) | x(1..N+1) (N+1, 6) | s (6,)], x = [position, v
                x_min - s <= x(n) <= x_max + s,  n = 1..N+1,  s >= 0                 (eq. 7, softened)
                u_min <= u(n) <= u_max                                            (eq. 8, hard)
 
-with c(n) = g ("hover"), f(n) + g ("planned") or 0 ("raw"), W_E = input_weight * I3.
+with c(n) = g ("hover"), f(n) + g ("planned") or 0 ("raw").
+
+Condensed form: the variables are z = [u(0..N) (N+1, 3) | s (6,)] and the states are affine in them,
+x(1..N+1) = h + G u, with h the free response to x(0) and f + g (`predict` with u = 0) and G the
+(6(N+1), 3(N+1)) input-to-state matrix. Measured against the sparse form (states as variables, 150
+variables) on 60 random instances: the sparse form costs less per iteration (4.5 vs 6 us) and re-factorises
+faster after a terminal-weight change (57 vs 87-120 us), but ADMM converges 2-4x slower on it when state
+bounds are active (cold: 90th percentile 1081 vs 560 iterations, 2 of 60 hit the 4000 cap; the condensed
+form solved all within 1625), and warm-started in closed loop it takes 25 iterations against 15.
+Robustness decided.
 
 State bounds are soft because a strong external input can make them infeasible (METHOD.md, pitfall 1). Slack
 layout: one slack per state component (x, y, z, vx, vy, vz) shared over the horizon, an L-infinity penalty:
 6 extra variables instead of 96, and exact (the plan equals the hard-bounded one whenever that exists) as long
-as slack_weight exceeds the summed multipliers of the component's bound rows. The small quadratic slack term
-does not change that (its slope at s = 0 is zero) but gives OSQP curvature in s: with a purely linear penalty
-it needed about 1100 iterations per cold solve, with it about 170.
+as slack_weight exceeds the summed multipliers of the component's bound rows. The quadratic slack term does
+not change that (its slope at s = 0 is zero) but gives OSQP curvature in s: with a purely linear penalty a
+cold solve took about 1100 iterations even with no bound active, with it about 200.
 """
 
 from __future__ import annotations
@@ -31,6 +40,9 @@ import scipy.sparse as sp
 
 EFFORT_MODES = ("hover", "planned", "raw")
 ACCEPTED_STATUSES = ("solved", "solved inaccurate")
+# Any argument beyond this (m, m/s, m/s^2, or weight) is rejected: it is far outside any flight, and the
+# solver's data would leave OSQP's range (it takes 1e30 as infinity and silently ignores invalid updates).
+PLAUSIBLE_MAGNITUDE = 1.0e6
 
 
 @dataclass(frozen=True)
@@ -46,11 +58,10 @@ class MpcParams:
     slack_quadratic_weight: its quadratic companion (per m^2), there for the solver's convergence.
 
     Solver: eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its iteration cap, polishing
-    its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate" (iteration cap reached with
-    residuals within 10x the tolerances) as ok: the plan is re-rolled through the exact dynamics with inputs
-    clipped into their box, so it is consistent and admissible, only less optimal; braking would be worse.
-    warm_start_shift_steps: horizon steps the previous solution is shifted for the next warm start (1 when the
-    control tick equals dt_s, 0 when ticks are much shorter than a step).
+    its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate" (the iteration cap was hit
+    with the residuals within OSQP's loosened tolerances) as ok: the plan is re-rolled through the exact
+    dynamics with inputs clipped into their box, so it is consistent and admissible, only less optimal, which
+    beats braking. Every other status (infeasible, cap hit far from a solution, non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
     """
 
@@ -74,7 +85,6 @@ class MpcParams:
     max_iterations: int = 4000
     polishing: bool = True
     accept_inaccurate: bool = True
-    warm_start_shift_steps: int = 1
     violation_tolerance: float = 1.0e-4
 
     def __post_init__(self) -> None:
@@ -101,8 +111,6 @@ class MpcParams:
                 raise ValueError(f"{name} must be a finite number >= 0, got {getattr(self, name)}")
         if not (np.isfinite(self.slack_weight) and self.slack_weight > 0):
             raise ValueError(f"slack_weight must be positive, got {self.slack_weight}")
-        if not 0 <= self.warm_start_shift_steps <= self.horizon_steps:
-            raise ValueError("warm_start_shift_steps must be in 0..horizon_steps")
 
     @property
     def gravity_vector_mps2(self) -> np.ndarray:
@@ -122,7 +130,7 @@ class MpcSolution:
     velocities_mps: np.ndarray  # (N+2, 3)
     max_state_violation: float  # largest slack (m or m/s); 0 when no soft bound is active
     iterations: int
-    solve_time_s: float  # OSQP's own run time (no clocks read here)
+    solve_time_s: float  # OSQP's own run time: data update (re-factorisation), iterations, polish
 
 
 def predict(
@@ -179,6 +187,15 @@ def braking_plan(
     return np.clip(positions, params.position_min_m, params.position_max_m), velocities
 
 
+def _magnitude_problem(value: np.ndarray, name: str) -> str | None:
+    """Why `value` cannot enter the QP (not finite, or beyond PLAUSIBLE_MAGNITUDE), or None."""
+    if not np.all(np.isfinite(value)):
+        return f"{name} is not finite"
+    if np.any(np.abs(value) > PLAUSIBLE_MAGNITUDE):
+        return f"{name} is implausibly large (beyond {PLAUSIBLE_MAGNITUDE:g})"
+    return None
+
+
 def _checked_weight(
     value: np.ndarray | None, default: float, name: str
 ) -> tuple[np.ndarray | None, str | None]:
@@ -191,8 +208,9 @@ def _checked_weight(
     w = np.asarray(value, dtype=float)
     if w.shape != (3, 3):
         raise ValueError(f"{name} must be a (3, 3) matrix, got shape {w.shape}")
-    if not np.all(np.isfinite(w)):
-        return None, f"{name} is not finite"
+    why = _magnitude_problem(w, name)
+    if why:
+        return None, why
     scale = max(1.0, float(np.max(np.abs(w))))
     if np.max(np.abs(w - w.T)) > 1e-9 * scale:
         return None, f"{name} is not symmetric"
@@ -203,38 +221,34 @@ def _checked_weight(
 
 
 class ModelPredictiveController:
-    """The MPC of eqs. (4)-(8), built once as an OSQP problem and updated every solve.
+    """The MPC of eqs. (4)-(8), built once as a condensed OSQP problem and updated every solve.
 
-    Sparse form (states kept as variables: 150 variables, 342 rows for N = 15), chosen by measurement against
-    the condensed form (inputs and slacks only): per iteration they cost about the same (4.6 vs 5.0 us), but
-    the condensed P is dense, because the terminal weights couple every input, so re-factorising after a
-    terminal-weight change costs 87 us against 51 us, and the sparse P keeps those weights in two dense 3x3
-    blocks: `update(Px=...)` without re-setup. Each solve updates q, l, u (Px only when a terminal weight
-    changed) and warm-starts OSQP from the previous primal-dual solution shifted by `warm_start_shift_steps`.
+    Each solve updates q, l, u (and P's values, whose dense pattern is fixed, only when a terminal weight
+    changed) and warm-starts OSQP from the previous primal-dual solution, shifted by as many steps as the
+    vehicle has moved along the previous plan: k = the plan step whose state is nearest the new x(0). At a
+    control tick of dt_s that is one step (receding horizon); for an identical re-solve, or ticks much shorter
+    than dt_s, it is zero. The MPC reads no clock, so it infers the elapsed steps from the state.
     """
 
     def __init__(self, params: MpcParams) -> None:
         self._params = params
-        n_steps = params.horizon_steps + 1
-        self._n_steps = n_steps
-        self._nu = 3 * n_steps
-        self._nx = 6 * n_steps
-        self._n_var = self._nu + self._nx + 6
-        self._x_last = self._nu + self._nx - 6  # column of x(N+1)
-        dt = params.dt_s
-        self._a6 = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
-        self._b6 = np.vstack([0.5 * dt * dt * np.eye(3), dt * np.eye(3)])
+        m = params.horizon_steps + 1
+        self._n_steps = m
+        self._nu = 3 * m
+        self._n_var = self._nu + 6
         self._g = params.gravity_vector_mps2
         self._input_min = np.asarray(params.input_min_mps2, dtype=float)
         self._input_max = np.asarray(params.input_max_mps2, dtype=float)
         self._state_min = np.concatenate([params.position_min_m, params.velocity_min_mps]).astype(float)
         self._state_max = np.concatenate([params.position_max_m, params.velocity_max_mps]).astype(float)
-        self._build_p_pattern()
+        self._free_x0, self._input_to_state = self._prediction_matrices()
+        self._g_terminal = self._input_to_state[-6:]
         self._a_matrix = self._build_constraints()
+        self._upper_rows = slice(self._nu, self._nu + 6 * m)  # rows of G u - s <= x_max - h
+        self._lower_rows = slice(self._nu + 6 * m, self._nu + 12 * m)  # rows of G u + s >= x_min - h
         self._l_template, self._u_template = self._constant_bounds()
-        self._q_template = np.zeros(self._n_var)
-        self._q_template[-6:] = params.slack_weight
-        self._z_shift, self._y_shift = self._shift_permutations(params.warm_start_shift_steps)
+        self._p_rows, self._p_cols, self._p_indptr = self._p_pattern()
+        self._shifts = [self._shift_permutations(k) for k in range(m)]
         self._setup_solver()
 
     @property
@@ -250,109 +264,105 @@ class ModelPredictiveController:
         self._setup_solver()
 
     # ----------------------------------------------------------------------------------------------- build
-    def _build_p_pattern(self) -> None:
-        """Upper-triangular CSC pattern of P: diagonal on u and s, two dense 3x3 blocks on x(N+1)."""
-        indptr = [0]
-        indices: list[int] = []
-        slots: list[int] = []  # data positions of the terminal blocks
-        block_rc: list[tuple[int, int, int]] = []  # (0 = position / 1 = velocity, row, col)
-        for col in range(self._n_var):
-            if col < self._nu or col >= self._nu + self._nx:
-                indices.append(col)
-            elif col >= self._x_last:
-                block, c = divmod(col - self._x_last, 3)
-                for r in range(c + 1):
-                    slots.append(len(indices))
-                    block_rc.append((block, r, c))
-                    indices.append(self._x_last + 3 * block + r)
-            indptr.append(len(indices))
-        self._p_indptr = np.array(indptr)
-        self._p_indices = np.array(indices)
-        self._p_slots = np.array(slots)
-        self._p_block_rc = tuple(np.array(block_rc).T)
-        base = np.zeros(len(indices))
-        base[: self._nu] = 2.0 * self._params.input_weight
-        base[-6:] = 2.0 * self._params.slack_quadratic_weight
-        self._p_base = base
+    def _prediction_matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """(6M, 6) map of x(0) and (6M, 3M) map of the accelerations a(0..N) to stacked x(1..N+1), M = N+1.
 
-    def _p_data(self, wp: np.ndarray, wv: np.ndarray) -> np.ndarray:
-        """P's values for terminal weights wp, wv (3, 3): 2 W_E, 2 W_p, 2 W_v (OSQP minimises z'Pz/2+q'z)."""
-        data = self._p_base.copy()
-        data[self._p_slots] = 2.0 * np.stack([wp, wv])[self._p_block_rc]
-        return data
+        From eqs. (6) and (9) per axis: p(k) = p(0) + k dt v(0) + sum_{n<k} dt^2 (k - n - 1/2) a(n),
+        v(k) = v(0) + sum_{n<k} dt a(n); a(n) = u(n) + f(n) + g enters like u(n), so one matrix serves both.
+        """
+        m, dt = self._n_steps, self._params.dt_s
+        k = np.arange(1, m + 1)[:, None]
+        n = np.arange(m)[None, :]
+        to_position = np.where(n < k, dt * dt * (k - n - 0.5), 0.0)
+        to_velocity = np.where(n < k, dt, 0.0)
+        gain = np.zeros((m, 6, m, 3))
+        free = np.zeros((m, 6, 6))
+        for axis in range(3):
+            gain[:, axis, :, axis] = to_position
+            gain[:, 3 + axis, :, axis] = to_velocity
+            free[:, axis, axis] = 1.0
+            free[:, axis, 3 + axis] = dt * k[:, 0]
+            free[:, 3 + axis, 3 + axis] = 1.0
+        return free.reshape(6 * m, 6), gain.reshape(6 * m, 3 * m)
 
     def _build_constraints(self) -> sp.csc_matrix:
-        """Rows: dynamics 6(N+1), input box 3(N+1), state upper 6(N+1), state lower 6(N+1), s >= 0 (6)."""
-        n_steps, nu, nx = self._n_steps, self._nu, self._nx
-        # dynamics: x(n+1) - A x(n) - B u(n) = B (f(n) + g) [+ A x(0) for n = 0]
-        dyn_x = sp.identity(nx) - sp.kron(sp.eye(n_steps, k=-1), self._a6)
-        dynamics = sp.hstack([sp.kron(sp.identity(n_steps), -self._b6), dyn_x, sp.csc_matrix((nx, 6))])
-        box = sp.hstack([sp.identity(nu), sp.csc_matrix((nu, nx + 6))])
-        slack_of_row = sp.csc_matrix(np.tile(np.eye(6), (n_steps, 1)))
-        upper = sp.hstack([sp.csc_matrix((nx, nu)), sp.identity(nx), -slack_of_row])
-        lower = sp.hstack([sp.csc_matrix((nx, nu)), sp.identity(nx), slack_of_row])
-        slack = sp.hstack([sp.csc_matrix((6, nu + nx)), sp.identity(6)])
-        return sp.vstack([dynamics, box, upper, lower, slack]).tocsc()
+        """Rows: input box 3M, state upper 6M (G u - s), state lower 6M (G u + s), s >= 0 (6)."""
+        m, nu = self._n_steps, self._nu
+        slack_of_row = np.tile(np.eye(6), (m, 1))
+        gain = self._input_to_state
+        return sp.csc_matrix(
+            np.block(
+                [
+                    [np.eye(nu), np.zeros((nu, 6))],
+                    [gain, -slack_of_row],
+                    [gain, slack_of_row],
+                    [np.zeros((6, nu)), np.eye(6)],
+                ]
+            )
+        )
 
     def _constant_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """l, u of every row; the dynamics rows (zero here) are filled in per solve."""
-        n_steps, nx = self._n_steps, self._nx
-        inf = np.full(nx, np.inf)
-        lo = np.concatenate(
-            [
-                np.zeros(nx),
-                np.tile(self._input_min, n_steps),
-                -inf,
-                np.tile(self._state_min, n_steps),
-                np.zeros(6),
-            ]
-        )
+        """l, u of every row, state bounds not yet shifted by the free response (`_solve_vectors` does)."""
+        m = self._n_steps
+        inf = np.full(6 * m, np.inf)
+        lo = np.concatenate([np.tile(self._input_min, m), -inf, np.tile(self._state_min, m), np.zeros(6)])
         hi = np.concatenate(
-            [
-                np.zeros(nx),
-                np.tile(self._input_max, n_steps),
-                np.tile(self._state_max, n_steps),
-                inf,
-                np.full(6, np.inf),
-            ]
+            [np.tile(self._input_max, m), np.tile(self._state_max, m), inf, np.full(6, np.inf)]
         )
         return lo, hi
 
+    def _p_pattern(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fixed CSC pattern of P's upper triangle: dense on the inputs (terminal weights couple them all),
+        diagonal on the slacks. Returns row and column of every stored entry, and indptr."""
+        rows, cols = np.triu_indices(self._n_var)
+        keep = (cols < self._nu) | (rows == cols)
+        rows, cols = rows[keep], cols[keep]
+        order = np.lexsort((rows, cols))
+        rows, cols = rows[order], cols[order]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=self._n_var))])
+        return rows, cols, indptr
+
+    def _p_data(self, w_terminal: np.ndarray) -> np.ndarray:
+        """P's stored values for the (6, 6) terminal weight blockdiag(W_p, W_v); OSQP minimises z'Pz/2+q'z."""
+        p = np.zeros((self._n_var, self._n_var))
+        gt = self._g_terminal
+        p[: self._nu, : self._nu] = (
+            2.0 * self._params.input_weight * np.eye(self._nu) + 2.0 * gt.T @ w_terminal @ gt
+        )
+        p[self._nu :, self._nu :] = 2.0 * self._params.slack_quadratic_weight * np.eye(6)
+        return p[self._p_rows, self._p_cols]
+
     def _shift_permutations(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Index arrays that move every per-step block of z and y k steps earlier, repeating the last step."""
-        steps = np.minimum(np.arange(self._n_steps) + k, self._n_steps - 1)
+        m, nu = self._n_steps, self._nu
+        steps = np.minimum(np.arange(m) + k, m - 1)
 
         def block(start: int, width: int) -> np.ndarray:
             return (start + width * steps[:, None] + np.arange(width)).ravel()
 
-        nu, nx = self._nu, self._nx
-        z_idx = np.concatenate([block(0, 3), block(nu, 6), np.arange(nu + nx, nu + nx + 6)])
-        y_idx = np.concatenate(
-            [
-                block(0, 6),
-                block(nx, 3),
-                block(nx + nu, 6),
-                block(2 * nx + nu, 6),
-                np.arange(3 * nx + nu, 3 * nx + nu + 6),
-            ]
-        )
+        slacks = np.arange(6)
+        z_idx = np.concatenate([block(0, 3), nu + slacks])
+        y_idx = np.concatenate([block(0, 3), block(nu, 6), block(nu + 6 * m, 6), nu + 12 * m + slacks])
         return z_idx, y_idx
+
+    def _elapsed_steps(self, plan: np.ndarray, x0: np.ndarray) -> int:
+        """Index k in 0..N of the previous plan's state (rows of (M+1, 6)) nearest x0 (6,), velocities
+        weighted by dt_s so both parts are metres."""
+        scale = np.array([1.0, 1.0, 1.0] + [self._params.dt_s] * 3)
+        return int(np.argmin(np.linalg.norm((plan[: self._n_steps] - x0) * scale, axis=1)))
 
     def _setup_solver(self) -> None:
         prm = self._params
-        self._wp = prm.terminal_position_weight * np.eye(3)
-        self._wv = prm.terminal_velocity_weight * np.eye(3)
+        self._w_terminal = np.diag([prm.terminal_position_weight] * 3 + [prm.terminal_velocity_weight] * 3)
+        self._q_terminal = 2.0 * self._g_terminal.T @ self._w_terminal
         p_matrix = sp.csc_matrix(
-            (self._p_data(self._wp, self._wv), self._p_indices, self._p_indptr),
-            shape=(self._n_var, self._n_var),
+            (self._p_data(self._w_terminal), self._p_rows, self._p_indptr), shape=(self._n_var, self._n_var)
         )
         # OSQP fixes its cost scaling at setup from P and q: set up with the q of a representative (hover)
-        # problem, slack weights included, or later updates run badly scaled (measured: 2050 vs 170
-        # iterations).
+        # problem, slack weights included; with q = 0 later solves ran badly scaled (2050 vs 170 iterations).
         centre = 0.5 * (self._state_min[:3] + self._state_max[:3])
-        q, lo, hi = self._solve_vectors(
-            np.concatenate([centre, np.zeros(3)]), centre, np.zeros(3), np.zeros((self._n_steps, 3))
-        )
+        x0 = np.concatenate([centre, np.zeros(3)])
+        q, lo, hi = self._solve_vectors(x0, x0, np.zeros((self._n_steps, 3)))
         self._solver = osqp.OSQP()
         self._solver.setup(
             p_matrix,
@@ -366,30 +376,31 @@ class ModelPredictiveController:
             polishing=prm.polishing,
             warm_starting=True,
             adaptive_rho=True,
-            adaptive_rho_interval=25,  # a fixed interval keeps the solves deterministic (not time-based)
+            adaptive_rho_interval=25,  # fixed, so solves are deterministic (the default adapts on timing)
             check_termination=5,
             verbose=False,
         )
-        self._warm: tuple[np.ndarray, np.ndarray] | None = None
+        self._warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # z, y, plan states (M+1, 6)
 
     # ----------------------------------------------------------------------------------------------- solve
     def _solve_vectors(
-        self, x0: np.ndarray, p_ref: np.ndarray, v_ref: np.ndarray, f: np.ndarray
+        self, x0: np.ndarray, reference: np.ndarray, f: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """q, l, u from x(0) (6,), the terminal reference (3,) + (3,) and f (N+1, 3)."""
-        effort = self._params.effort
-        q = self._q_template.copy()
-        if effort == "hover":
-            q[: self._nu] = np.tile((2.0 * self._params.input_weight) * self._g, self._n_steps)
-        elif effort == "planned":
-            q[: self._nu] = ((2.0 * self._params.input_weight) * (f + self._g)).ravel()
-        q[self._x_last : self._x_last + 3] = -2.0 * (self._wp @ p_ref)
-        q[self._x_last + 3 : self._x_last + 6] = -2.0 * (self._wv @ v_ref)
-        rhs = ((f + self._g) @ self._b6.T).ravel()
-        rhs[:6] += self._a6 @ x0
+        """q, l, u from x(0) (6,), the terminal reference (6,) and f (M, 3); h (6M,) is the free response."""
+        prm = self._params
+        free = self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
+        if prm.effort == "hover":
+            offset = np.tile(self._g, self._n_steps)
+        elif prm.effort == "planned":
+            offset = (f + self._g).ravel()
+        else:
+            offset = np.zeros(self._nu)
+        q = np.empty(self._n_var)
+        q[: self._nu] = (2.0 * prm.input_weight) * offset + self._q_terminal @ (free[-6:] - reference)
+        q[self._nu :] = prm.slack_weight
         lo, hi = self._l_template.copy(), self._u_template.copy()
-        lo[: self._nx] = rhs
-        hi[: self._nx] = rhs
+        lo[self._lower_rows] -= free
+        hi[self._upper_rows] -= free
         return q, lo, hi
 
     def _failure(self, status: str, message: str, iterations: int = 0, time_s: float = 0.0) -> MpcSolution:
@@ -421,8 +432,9 @@ class ModelPredictiveController:
         (target_position_m, target_velocity_mps), (3,) each, under the external inputs f(0..N), (N+1, 3).
 
         terminal_*_weight: (3, 3) symmetric PSD W_p / W_v for this solve; None = the params' scalar * I3.
-        Wrong shapes raise ValueError (a programming error). Non-finite numbers or an asymmetric / indefinite
-        weight give ok=False, status "invalid_input"; a solver failure gives ok=False with OSQP's status.
+        Wrong shapes raise ValueError (a programming error). Non-finite or implausibly large numbers, or an
+        asymmetric / indefinite weight, give ok=False, status "invalid_input", and leave the controller as is;
+        a solver failure gives ok=False with OSQP's status, and the next solve starts cold.
         """
         prm = self._params
         n = self._n_steps
@@ -438,7 +450,10 @@ class ModelPredictiveController:
             if arr.shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
             arrays[name] = arr
-        reasons = [f"{name} is not finite" for name, arr in arrays.items() if not np.all(np.isfinite(arr))]
+        reasons = []
+        values = np.concatenate([arr.ravel() for arr in arrays.values()])
+        if not np.all(np.abs(values) <= PLAUSIBLE_MAGNITUDE):  # also False for NaN
+            reasons = [why for name, arr in arrays.items() if (why := _magnitude_problem(arr, name))]
         wp, why_p = _checked_weight(
             terminal_position_weight, prm.terminal_position_weight, "terminal_position_weight"
         )
@@ -449,29 +464,30 @@ class ModelPredictiveController:
         if reasons:
             return self._failure("invalid_input", "; ".join(reasons))
 
-        if not (np.array_equal(wp, self._wp) and np.array_equal(wv, self._wv)):
-            self._wp, self._wv = wp, wv
-            self._solver.update(Px=self._p_data(wp, wv))
+        w_terminal = np.zeros((6, 6))
+        w_terminal[:3, :3], w_terminal[3:, 3:] = wp, wv
+        if not np.array_equal(w_terminal, self._w_terminal):
+            self._w_terminal = w_terminal
+            self._q_terminal = 2.0 * self._g_terminal.T @ w_terminal
+            self._solver.update(Px=self._p_data(w_terminal))
         x0 = np.concatenate([arrays["position_m"], arrays["velocity_mps"]])
+        reference = np.concatenate([arrays["target_position_m"], arrays["target_velocity_mps"]])
         f = arrays["external_inputs_mps2"]
-        q, lo, hi = self._solve_vectors(x0, arrays["target_position_m"], arrays["target_velocity_mps"], f)
+        q, lo, hi = self._solve_vectors(x0, reference, f)
         self._solver.update(q=q, l=lo, u=hi)
         if self._warm is not None:
-            self._solver.warm_start(x=self._warm[0][self._z_shift], y=self._warm[1][self._y_shift])
+            z_prev, y_prev, plan_prev = self._warm
+            z_shift, y_shift = self._shifts[self._elapsed_steps(plan_prev, x0)]
+            self._solver.warm_start(x=z_prev[z_shift], y=y_prev[y_shift])
         result = self._solver.solve(raise_error=False)
-        status, iterations, run_time = (
-            str(result.info.status),
-            int(result.info.iter),
-            float(result.info.run_time),
-        )
+        info = result.info
+        status, iterations, run_time = str(info.status), int(info.iter), float(info.run_time)
         accepted = ACCEPTED_STATUSES if prm.accept_inaccurate else ACCEPTED_STATUSES[:1]
         if status not in accepted or not (np.all(np.isfinite(result.x)) and np.all(np.isfinite(result.y))):
             self._warm = None
-            self._solver.warm_start(x=np.zeros(self._n_var), y=np.zeros(len(self._l_template)))
-            return self._failure(
-                status, f"OSQP: {status} after {iterations} iterations", iterations, run_time
-            )
-        self._warm = (np.array(result.x), np.array(result.y))
+            self._solver.warm_start(x=np.zeros(self._n_var), y=np.zeros(self._a_matrix.shape[0]))
+            message = f"OSQP: {status} after {iterations} iterations"
+            return self._failure(status, message, iterations, run_time)
 
         # The plan returned is the exact rollout of the box-clipped inputs: it obeys the dynamics exactly.
         inputs = np.clip(result.x[: self._nu].reshape(n, 3), self._input_min, self._input_max)
@@ -482,11 +498,13 @@ class ModelPredictiveController:
             external_inputs_mps2=f,
             params=prm,
         )
-        states = np.hstack([positions[1:], velocities[1:]])
-        violation = float(max(np.max(states - self._state_max), np.max(self._state_min - states)))
-        violation = violation if violation > prm.violation_tolerance else 0.0
-        if not (np.all(np.isfinite(states)) and np.isfinite(violation)):
+        plan = np.hstack([positions, velocities])
+        violation = float(max(np.max(plan[1:] - self._state_max), np.max(self._state_min - plan[1:])))
+        if not (np.all(np.isfinite(plan)) and np.isfinite(violation)):
+            self._warm = None
             return self._failure("non_finite_plan", "the plan is not finite", iterations, run_time)
+        self._warm = (np.array(result.x), np.array(result.y), plan)
+        violation = violation if violation > prm.violation_tolerance else 0.0
         return MpcSolution(
             ok=True,
             status=status,

@@ -83,7 +83,18 @@ class VehicleModel(BaseModel):
 class PersonModel(BaseModel):
     truth_m: Vector3 | None = Field(description="true body centre (simulation only)")
     estimate: EstimateModel | None
-    tracking_error_m: float | None = Field(description="mean over MAVs of |estimate - truth| (simulation only)")
+    tracking_error_m: float | None = Field(
+        description="mean over MAVs of |estimate - truth| (simulation only)")
+
+
+class CountersModel(BaseModel):
+    """Bad inputs refused and counted since start."""
+
+    refused_commands: int = Field(description="operator commands refused (HTTP 422 / GUI notification)")
+    rejected_detections: int = Field(description="detections the trackers gated out, stale or invalid")
+    rejected_messages: int = Field(description="malformed or misaddressed messages between MAVs")
+    controller_errors: int = Field(description="controller exceptions caught (the MAV braked)")
+    braking_ticks: int = Field(description="ticks a MAV braked instead of applying an unsolved plan")
 
 
 class StateModel(BaseModel):
@@ -94,7 +105,9 @@ class StateModel(BaseModel):
     obstacles: list[ObstacleModel]
     arena_min_m: Vector3
     arena_max_m: Vector3
-    rejected_inputs: int = Field(description="bad inputs the mission refused and counted so far")
+    counters: CountersModel
+
+
 
 
 class LandAllModel(BaseModel):
@@ -117,19 +130,21 @@ def formation_model(view: SceneView) -> FormationStateModel:
 
 
 def obstacle_model(obstacle) -> ObstacleModel:
-    return ObstacleModel(obstacle_id=obstacle.obstacle_id, kind=obstacle.kind, x_m=float(obstacle.center_m[0]),
-                         y_m=float(obstacle.center_m[1]), radius_m=obstacle.radius_m, height_m=obstacle.height_m)
+    return ObstacleModel(obstacle_id=obstacle.obstacle_id, kind=obstacle.kind,
+                         x_m=float(obstacle.center_m[0]), y_m=float(obstacle.center_m[1]),
+                         radius_m=obstacle.radius_m, height_m=obstacle.height_m)
 
 
 def vehicle_model(v: VehicleView) -> VehicleModel:
     return VehicleModel(vehicle_id=v.vehicle_id, phase=v.phase, in_formation=v.in_formation, mode=v.mode,
-                        armed=v.armed, in_air=v.in_air, position_m=_vec(v.position_m), yaw_rad=float(v.yaw_rad),
-                        battery_fraction=_num(v.battery_fraction), link_age_s=float(v.link_age_s),
-                        link_stale=v.link_stale, solve_status=v.solve_status, solver_time_s=_num(v.solver_time_s),
+                        armed=v.armed, in_air=v.in_air, position_m=_vec(v.position_m),
+                        yaw_rad=float(v.yaw_rad), battery_fraction=_num(v.battery_fraction),
+                        link_age_s=float(v.link_age_s), link_stale=v.link_stale, solve_status=v.solve_status,
+                        solver_time_s=_num(v.solver_time_s),
                         plan_positions_m=[_vec(p) for p in v.plan_positions_m])
 
 
-def state_model(view: SceneView, *, rejected_inputs: int) -> StateModel:
+def state_model(view: SceneView, *, counters: dict[str, int]) -> StateModel:
     """The JSON state snapshot: the same view the 3-D page draws."""
     estimate = None
     if view.person_estimate is not None:
@@ -142,8 +157,9 @@ def state_model(view: SceneView, *, rejected_inputs: int) -> StateModel:
                          estimate=estimate, tracking_error_m=_num(view.tracking_error_m))
     return StateModel(time_s=view.time_s, formation=formation_model(view),
                       vehicles=[vehicle_model(v) for v in view.vehicles], person=person,
-                      obstacles=[obstacle_model(o) for o in view.obstacles], arena_min_m=_vec(view.arena_min_m),
-                      arena_max_m=_vec(view.arena_max_m), rejected_inputs=rejected_inputs)
+                      obstacles=[obstacle_model(o) for o in view.obstacles],
+                      arena_min_m=_vec(view.arena_min_m), arena_max_m=_vec(view.arena_max_m),
+                      counters=CountersModel(**counters))
 
 
 def landing_page(*, viser_url: str) -> str:
@@ -151,6 +167,7 @@ def landing_page(*, viser_url: str) -> str:
     url = html.escape(viser_url, quote=True)
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>skyring ground station</title>
+<link rel="icon" href="data:,">
 <style>
 html, body {{ margin: 0; height: 100%; font-family: sans-serif; }}
 header {{ padding: 6px 12px; background: #223; color: #eee; font-size: 14px; }}
@@ -169,8 +186,9 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
     """The FastAPI app over `station`; the landing page embeds viser at http://<the host the browser used>:
     viser_port. ws_rate_hz: how often /ws sends the state (>= 10 Hz for the operator)."""
     app = FastAPI(title="skyring ground station",
-                  description="Live state and operator commands for a team of MAVs flying the active-perception "
-                              "formation. Refusals are HTTP 422 with a message saying what to do instead.",
+                  description="Live state and operator commands for a team of MAVs flying the "
+                              "active-perception formation. Refusals are HTTP 422 with a message saying what "
+                              "to do instead.",
                   version="0.1.0")
 
     @app.exception_handler(UnknownTargetError)
@@ -187,7 +205,9 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
         return JSONResponse(status_code=422, content={"detail": f"malformed request: {problems}"})
 
     def state() -> StateModel:
-        return state_model(station.scene_view(), rejected_inputs=station.rejected_inputs())
+        with station.lock:  # the view and the counters of one instant
+            view, counters = station.scene_view(), station.counters()
+        return state_model(view, counters=counters)
 
     @app.get("/", response_class=HTMLResponse, include_in_schema=False)
     async def index(request: Request) -> str:
@@ -224,7 +244,8 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
         return [obstacle_model(o) for o in station.scene_view().obstacles]
 
     @app.post("/api/obstacles", response_model=ObstacleModel, status_code=201,
-              responses={422: {"description": "outside the arena, bad radius, or covering the person or a MAV"}})
+              responses={422: {"description": "outside the arena, bad radius, or covering the person or a "
+                                               "MAV"}})
     async def post_obstacle(body: ObstacleIn) -> ObstacleModel:
         obstacle_id = station.add_obstacle(x_m=body.x_m, y_m=body.y_m, radius_m=body.radius_m)
         return next(obstacle_model(o) for o in station.scene_view().obstacles if o.obstacle_id == obstacle_id)

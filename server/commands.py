@@ -66,7 +66,9 @@ class CommandLimits:
         low = self.safety_distance_m / self.person_clearance_fraction
         if team_size >= 2:
             low = max(low, self.formation_spacing_m / (2.0 * math.sin(math.pi / team_size)))
-        half_width = 0.5 * min(self.arena_max_m[0] - self.arena_min_m[0], self.arena_max_m[1] - self.arena_min_m[1])
+        width_x = self.arena_max_m[0] - self.arena_min_m[0]
+        width_y = self.arena_max_m[1] - self.arena_min_m[1]
+        half_width = 0.5 * min(width_x, width_y)
         return _round_up(low), _round_down(half_width - self.obstacle_clearance_m)
 
     def h_des_range_m(self) -> tuple[float, float]:
@@ -102,14 +104,15 @@ def finite(name: str, value: object) -> float:
     return number
 
 
-def check_formation(*, d_des_m: object, h_des_m: object, limits: CommandLimits, team_size: int) -> FormationParams:
+def check_formation(*, d_des_m: object, h_des_m: object, limits: CommandLimits,
+                    team_size: int) -> FormationParams:
     """The FormationParams to apply, or CommandError naming the allowed range."""
     d_des, h_des = finite("d_des_m", d_des_m), finite("h_des_m", h_des_m)
     d_low, d_high = limits.d_des_range_m(team_size)
     if not d_low <= d_des <= d_high:
         raise CommandError(
-            f"d_des_m = {d_des:g} m is outside what the arena and safety distances allow with {team_size} MAVs in "
-            f"formation: choose a value between {d_low:g} and {d_high:g} m")
+            f"d_des_m = {d_des:g} m is outside what the arena and safety distances allow with {team_size} "
+            f"MAVs in formation: choose a value between {d_low:g} and {d_high:g} m")
     h_low, h_high = limits.h_des_range_m()
     if not h_low <= h_des <= h_high:
         raise CommandError(
@@ -132,15 +135,15 @@ def check_obstacle(*, x_m: object, y_m: object, radius_m: object, limits: Comman
     if r <= 0.0:
         raise CommandError(f"radius_m must be positive, got {r:g} m")
     if r > limits.max_obstacle_radius_m:
-        raise CommandError(f"radius_m = {r:g} m is larger than {limits.max_obstacle_radius_m:g} m: cover a large "
-                           "area with several obstacles")
+        raise CommandError(f"radius_m = {r:g} m is larger than {limits.max_obstacle_radius_m:g} m: cover a "
+                           "large area with several obstacles")
     (x0, y0, _), (x1, y1, _) = limits.arena_min_m, limits.arena_max_m
     if not (x0 <= x <= x1 and y0 <= y <= y1):
         raise CommandError(f"the obstacle's centre ({x:.1f}, {y:.1f}) m is outside the arena "
                            f"x in [{x0:g}, {x1:g}] m, y in [{y0:g}, {y1:g}] m: place it inside")
     if virtual_count >= limits.max_virtual_obstacles:
-        raise CommandError(f"there are already {virtual_count} virtual obstacles (the most allowed): remove one "
-                           "first")
+        raise CommandError(f"there are already {virtual_count} virtual obstacles (the most allowed): remove "
+                           "one first")
     keep = r + limits.obstacle_clearance_m
     for person in persons_m:
         gap = math.hypot(x - float(person[0]), y - float(person[1]))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, TextIO
 
@@ -16,7 +16,7 @@ from server import experiments as exp
 from server import figures
 
 
-class Experiment(str, Enum):
+class Experiment(StrEnum):
     """What `skyring experiment` can run: one of the paper's studies, or all of them."""
 
     METHODS = "methods"
@@ -60,7 +60,9 @@ def _clock(seconds: float) -> str:
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
 
 
-def _command_text(family: str, *, quick: bool, runs: int | None, duration: float | None, seed: int) -> str:
+def _command_text(
+    family: str, *, quick: bool, runs: int | None, duration: float | None, rate: float | None, seed: int
+) -> str:
     """The command as far as it decides the results (not --jobs, --out or --resume)."""
     parts = ["skyring experiment", family]
     if quick:
@@ -69,6 +71,8 @@ def _command_text(family: str, *, quick: bool, runs: int | None, duration: float
         parts.append(f"--runs {runs}")
     if duration is not None:
         parts.append(f"--duration {duration:g}")
+    if rate is not None:
+        parts.append(f"--rate {rate:g}")
     parts.append(f"--seed {seed}")
     return " ".join(parts)
 
@@ -81,6 +85,9 @@ def experiment(
     duration: Annotated[
         float | None, typer.Option(min=0.1, help="seconds per run (default: the paper's)")
     ] = None,
+    rate: Annotated[
+        float | None, typer.Option(min=1.0, max=1000.0, help="control rate, Hz (default: the paper's 100)")
+    ] = None,
     seed: Annotated[int, typer.Option(min=0, help="base seed; each run's seed is derived from it")] = 0,
     jobs: Annotated[
         int | None, typer.Option(min=1, help="parallel worker processes (default: CPU count)")
@@ -89,7 +96,7 @@ def experiment(
         "experiments"
     ),
     quick: Annotated[
-        bool, typer.Option("--quick", help="small CI profile: sweep end points, 2 runs of 30 s")
+        bool, typer.Option("--quick", help="small CI profile: sweep end points, few short runs at 10 Hz")
     ] = False,
     resume: Annotated[bool, typer.Option("--resume", help="reuse finished runs already in --out")] = False,
 ) -> None:
@@ -99,7 +106,7 @@ def experiment(
     """
     try:
         families = exp.select_families(family.value)
-        overrides = exp.ProfileOverrides(runs=runs, duration_s=duration)
+        overrides = exp.ProfileOverrides(runs=runs, duration_s=duration, rate_hz=rate)
         protocols = [
             exp.with_overrides(exp.quick_protocol(f) if quick else exp.paper_protocol(f), overrides)
             for f in families
@@ -123,11 +130,11 @@ def experiment(
     summaries = [rep.summarize(p, results) for p in protocols]
     drawn = figures.draw_all(summaries, out)
     context = rep.ReportContext(
-        command=_command_text(family.value, quick=quick, runs=runs, duration=duration, seed=seed),
+        command=_command_text(family.value, quick=quick, runs=runs, duration=duration, rate=rate, seed=seed),
         base_seed=seed,
         profile="quick (CI)"
         if quick
-        else "the paper's protocol" + (" with overrides" if runs or duration else ""),
+        else "the paper's protocol" + (" with overrides" if runs or duration or rate else ""),
     )
     text = rep.render_report(
         context=context, summaries=summaries, results=results, figures=drawn, wall_time_s=wall

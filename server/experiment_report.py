@@ -302,41 +302,55 @@ def _trend_text(x: np.ndarray, y: np.ndarray, x_unit: str) -> str:
         return "; the means are all equal"
     fit = scipy_stats.linregress(x, y)
     rho = scipy_stats.spearmanr(x, y).statistic
-    return (f"; linear fit {_fmt(fit.slope)} m per {x_unit}, R^2 = {_fmt(fit.rvalue**2)}, "
-            f"Spearman rho = {_fmt(rho)}")
+    return (
+        f"; linear fit {_fmt(fit.slope)} m per {x_unit}, R^2 = {_fmt(fit.rvalue**2)}, "
+        f"Spearman rho = {_fmt(rho)}"
+    )
 
 
 def _scalability_claims(s: FamilySummary) -> list[ClaimCheck]:
-    claim = ("Tracking error falls as MAVs are added (paper: nearly linearly from 3 to 16 MAVs); we check "
-             "that the largest team's mean error is below the smallest team's and that a line fitted "
-             "through the means falls.")
+    claim = (
+        "Tracking error falls as MAVs are added (paper: nearly linearly from 3 to 16 MAVs); we check "
+        "that the largest team's mean error is below the smallest team's and that a line fitted "
+        "through the means falls."
+    )
     x, y = _sweep(s, ERROR)
     if len(x) < 2:
         return [ClaimCheck(s.family, claim, "fewer than two team sizes were run", None)]
     slope = scipy_stats.linregress(x, y).slope if len(x) >= 3 else (y[-1] - y[0]) / (x[-1] - x[0])
-    evidence = (f"mean {ERROR}: {x[0]:g} MAVs {_fmt(y[0])} m, {x[-1]:g} MAVs {_fmt(y[-1])} m"
-                f"{_trend_text(x, y, 'MAV')}")
+    evidence = (
+        f"mean {ERROR}: {x[0]:g} MAVs {_fmt(y[0])} m, {x[-1]:g} MAVs {_fmt(y[-1])} m"
+        f"{_trend_text(x, y, 'MAV')}"
+    )
     return [ClaimCheck(s.family, claim, evidence, bool(y[-1] < y[0] and slope < 0))]
 
 
 def _commloss_claims(s: FamilySummary) -> list[ClaimCheck]:
     x, y = _sweep(s, ERROR)
     by_x = dict(zip(x.tolist(), y.tolist(), strict=True))
-    claim = (f"Tracking stays accurate up to {LOSS_ACCURATE_PERCENT:g} % link loss: mean error within "
-             f"{LOSS_TOLERANCE:.0%} of the error without loss.")
+    claim = (
+        f"Tracking stays accurate up to {LOSS_ACCURATE_PERCENT:g} % link loss: mean error within "
+        f"{LOSS_TOLERANCE:.0%} of the error without loss."
+    )
     if 0.0 in by_x and LOSS_ACCURATE_PERCENT in by_x:
         ratio = by_x[LOSS_ACCURATE_PERCENT] / by_x[0.0]
-        evidence = (f"mean {ERROR}: 0 % loss {_fmt(by_x[0.0])} m, {LOSS_ACCURATE_PERCENT:g} % loss "
-                    f"{_fmt(by_x[LOSS_ACCURATE_PERCENT])} m (ratio {_fmt(ratio)})")
+        evidence = (
+            f"mean {ERROR}: 0 % loss {_fmt(by_x[0.0])} m, {LOSS_ACCURATE_PERCENT:g} % loss "
+            f"{_fmt(by_x[LOSS_ACCURATE_PERCENT])} m (ratio {_fmt(ratio)})"
+        )
         claims = [ClaimCheck(s.family, claim, evidence, bool(ratio <= 1.0 + LOSS_TOLERANCE))]
     else:
         missing = f"0 % and {LOSS_ACCURATE_PERCENT:g} % loss were not both run"
         claims = [ClaimCheck(s.family, claim, missing, None)]
-    claim = ("Tracking gets worse as more messages are lost: the error at the highest loss is above the "
-             "loss-free one.")
+    claim = (
+        "Tracking gets worse as more messages are lost: the error at the highest loss is above the "
+        "loss-free one."
+    )
     if len(x) >= 2 and x[0] == 0.0:
-        evidence = (f"mean {ERROR}: 0 % loss {_fmt(y[0])} m, {x[-1]:g} % loss {_fmt(y[-1])} m"
-                    f"{_trend_text(x, y, 'percent of loss')}")
+        evidence = (
+            f"mean {ERROR}: 0 % loss {_fmt(y[0])} m, {x[-1]:g} % loss {_fmt(y[-1])} m"
+            f"{_trend_text(x, y, 'percent of loss')}"
+        )
         claims.append(ClaimCheck(s.family, claim, evidence, bool(y[-1] > y[0])))
     else:
         claims.append(ClaimCheck(s.family, claim, "0 % loss and a higher loss were not both run", None))
@@ -344,14 +358,18 @@ def _commloss_claims(s: FamilySummary) -> list[ClaimCheck]:
 
 
 def _obstacles_claims(s: FamilySummary) -> list[ClaimCheck]:
-    claim = (f"More obstacles only slightly worsen tracking: mean error with the most obstacles within "
-             f"{OBSTACLE_TOLERANCE:.0%} of the error without obstacles.")
+    claim = (
+        f"More obstacles only slightly worsen tracking: mean error with the most obstacles within "
+        f"{OBSTACLE_TOLERANCE:.0%} of the error without obstacles."
+    )
     x, y = _sweep(s, ERROR)
     if len(x) < 2 or x[0] != 0.0:
         return [ClaimCheck(s.family, claim, "0 obstacles and a higher count were not both run", None)]
     ratio = y[-1] / y[0]
-    evidence = (f"mean {ERROR}: 0 obstacles {_fmt(y[0])} m, {x[-1]:g} obstacles {_fmt(y[-1])} m "
-                f"(ratio {_fmt(ratio)}){_trend_text(x, y, 'obstacle')}")
+    evidence = (
+        f"mean {ERROR}: 0 obstacles {_fmt(y[0])} m, {x[-1]:g} obstacles {_fmt(y[-1])} m "
+        f"(ratio {_fmt(ratio)}){_trend_text(x, y, 'obstacle')}"
+    )
     return [ClaimCheck(s.family, claim, evidence, bool(ratio <= 1.0 + OBSTACLE_TOLERANCE))]
 
 
@@ -452,15 +470,20 @@ def render_report(
         "The same command gives this "
         f"report again, character for character, down to the `{TIMING_HEADING[3:]}` section.",
         "",
-        "| family | conditions | runs per condition | durations |",
-        "|---|---|---|---|",
     ]
-    for s in summaries:
-        p = s.protocol
-        lines.append(
-            f"| {p.family} | {', '.join(c.name for c in p.conditions)} | {p.runs} | "
-            f"{_durations_text(p.durations_s)} |"
-        )
+    rows = [
+        [
+            p.family,
+            ", ".join(c.name for c in p.conditions),
+            str(p.runs),
+            _durations_text(p.durations_s),
+            f"{p.rate_hz:g} Hz",
+        ]
+        for p in (s.protocol for s in summaries)
+    ]
+    lines.append(
+        markdown_table(["family", "conditions", "runs per condition", "durations", "control rate"], rows)
+    )
     lines += ["", f"Runs: {len(results)}, failed: {len(failed)}."]
     for r in failed:
         lines.append(

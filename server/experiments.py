@@ -52,11 +52,13 @@ class Condition:
 
 @dataclass(frozen=True)
 class Protocol:
-    """How one family is run: its conditions and each run's duration (one entry per run index, seconds)."""
+    """How one family is run: its conditions, each run's duration (one entry per run index, seconds) and the
+    control rate of every run (Hz; the paper's is 100)."""
 
     family: str
     conditions: tuple[Condition, ...]
     durations_s: tuple[float, ...]
+    rate_hz: float = 100.0
 
     @property
     def runs(self) -> int:
@@ -72,10 +74,16 @@ class RunSpec:
     run_index: int
     duration_s: float
     seed: int
+    rate_hz: float = 100.0
 
     def config_fields(self) -> dict[str, Any]:
-        """Keyword arguments for `SimConfig`: the condition's settings plus this run's duration and seed."""
-        return {**dict(self.condition.settings), "duration_s": self.duration_s, "seed": self.seed}
+        """Keyword arguments for `SimConfig`: the condition's settings and this run's duration, seed, rate."""
+        return {
+            **dict(self.condition.settings),
+            "duration_s": self.duration_s,
+            "seed": self.seed,
+            "rate_hz": self.rate_hz,
+        }
 
     def relative_path(self) -> Path:
         """Where this run's JSON report lives under the output directory."""
@@ -105,6 +113,7 @@ class ProfileOverrides:
 
     runs: int | None = None
     duration_s: float | None = None
+    rate_hz: float | None = None
 
 
 # ---- the paper's protocol (METHOD.md "Experiments in the paper") -------------------------------------------
@@ -128,6 +137,10 @@ QUICK_LOSS_PERCENT: tuple[int, ...] = (0, 25, 100)
 QUICK_OBSTACLE_COUNTS: tuple[int, ...] = (0, 20)
 QUICK_RUNS = 2
 QUICK_DURATION_S = 30.0
+# The MPC's own step (dt = 0.1 s): it re-plans every step as at 100 Hz, only the way-point follower sees
+# set-points less often; ten times faster to simulate.
+QUICK_RATE_HZ = 10.0
+PAPER_RATE_HZ = 100.0
 
 
 def _methods_conditions() -> tuple[Condition, ...]:
@@ -195,33 +208,35 @@ def paper_protocol(family: str) -> Protocol:
     3..16 MAVs with trees, 10 runs; 0..100 % link loss with 8 MAVs, 3 runs; 0..20 obstacles with 5 MAVs,
     5 runs of 180 s."""
     if family == "methods":
-        return Protocol(family, _methods_conditions(), (120.0,) * 10 + (180.0,) * 20)
+        return Protocol(family, _methods_conditions(), (120.0,) * 10 + (180.0,) * 20, PAPER_RATE_HZ)
     if family == "scalability":
-        return Protocol(family, _scalability_conditions(PAPER_VEHICLE_COUNTS), (120.0,) * 10)
+        return Protocol(family, _scalability_conditions(PAPER_VEHICLE_COUNTS), (120.0,) * 10, PAPER_RATE_HZ)
     if family == "commloss":
-        return Protocol(family, _commloss_conditions(PAPER_LOSS_PERCENT), (120.0,) * 3)
+        return Protocol(family, _commloss_conditions(PAPER_LOSS_PERCENT), (120.0,) * 3, PAPER_RATE_HZ)
     if family == "obstacles":
-        return Protocol(family, _obstacles_conditions(PAPER_OBSTACLE_COUNTS), (180.0,) * 5)
+        return Protocol(family, _obstacles_conditions(PAPER_OBSTACLE_COUNTS), (180.0,) * 5, PAPER_RATE_HZ)
     raise ValueError(f"unknown experiment family {family!r}; choose from {', '.join(FAMILIES)}")
 
 
 def quick_protocol(family: str) -> Protocol:
-    """A small profile for CI: the sweep's end points (and 25 % loss), 2 runs of 30 s per condition."""
+    """A small profile for CI: the sweep's end points (and 25 % loss), a few short runs per condition at the
+    MPC's own rate (QUICK_RATE_HZ)."""
     durations = (QUICK_DURATION_S,) * QUICK_RUNS
     if family == "methods":
-        return Protocol(family, _methods_conditions(), durations)
+        return Protocol(family, _methods_conditions(), durations, QUICK_RATE_HZ)
     if family == "scalability":
-        return Protocol(family, _scalability_conditions(QUICK_VEHICLE_COUNTS), durations)
+        return Protocol(family, _scalability_conditions(QUICK_VEHICLE_COUNTS), durations, QUICK_RATE_HZ)
     if family == "commloss":
-        return Protocol(family, _commloss_conditions(QUICK_LOSS_PERCENT), durations)
+        return Protocol(family, _commloss_conditions(QUICK_LOSS_PERCENT), durations, QUICK_RATE_HZ)
     if family == "obstacles":
-        return Protocol(family, _obstacles_conditions(QUICK_OBSTACLE_COUNTS), durations)
+        return Protocol(family, _obstacles_conditions(QUICK_OBSTACLE_COUNTS), durations, QUICK_RATE_HZ)
     raise ValueError(f"unknown experiment family {family!r}; choose from {', '.join(FAMILIES)}")
 
 
 def with_overrides(protocol: Protocol, overrides: ProfileOverrides) -> Protocol:
-    """`protocol` with the user's run count and/or duration. A new run count keeps the profile's mix of
-    durations in proportion (the paper's methods family: the first third of the runs short, the rest long)."""
+    """`protocol` with the user's run count, duration and/or control rate. A new run count keeps the profile's
+    mix of durations in proportion (the paper's methods family: the first third of the runs short, the rest
+    long)."""
     durations = protocol.durations_s
     if overrides.runs is not None:
         if overrides.runs < 1:
@@ -232,7 +247,12 @@ def with_overrides(protocol: Protocol, overrides: ProfileOverrides) -> Protocol:
         if not (np.isfinite(overrides.duration_s) and overrides.duration_s > 0):
             raise ValueError(f"duration must be a positive number of seconds, got {overrides.duration_s}")
         durations = (float(overrides.duration_s),) * len(durations)
-    return Protocol(protocol.family, protocol.conditions, durations)
+    rate = protocol.rate_hz
+    if overrides.rate_hz is not None:
+        if not (np.isfinite(overrides.rate_hz) and overrides.rate_hz > 0):
+            raise ValueError(f"rate must be a positive number of hertz, got {overrides.rate_hz}")
+        rate = float(overrides.rate_hz)
+    return Protocol(protocol.family, protocol.conditions, durations, rate)
 
 
 def select_families(name: str) -> tuple[str, ...]:
@@ -274,6 +294,7 @@ def plan_runs(protocols: Sequence[Protocol], *, base_seed: int) -> list[RunSpec]
             run_index=i,
             duration_s=d,
             seed=derive_seed(base_seed=base_seed, family=p.family, condition=c.name, run_index=i),
+            rate_hz=p.rate_hz,
         )
         for p in protocols
         for c in p.conditions
@@ -298,7 +319,7 @@ def run_one(spec: RunSpec, simulator: str = SIMULATION_MODULE) -> RunResult:
 
 
 def run_document(result: RunResult) -> dict[str, Any]:
-    """The JSON kept for one run: the simulator's report plus an `experiment` block saying where it belongs"""
+    """The JSON kept for one run: the simulator's report plus an `experiment` block placing it."""
     doc: dict[str, Any] = dict(result.report or {})
     doc["experiment"] = {
         "family": result.spec.family,
@@ -307,6 +328,7 @@ def run_document(result: RunResult) -> dict[str, Any]:
         "run_index": result.spec.run_index,
         "seed": result.spec.seed,
         "duration_s": result.spec.duration_s,
+        "sim_fields": result.spec.config_fields(),
         "error": result.error,
         "wall_s": result.wall_s,
     }
@@ -324,7 +346,7 @@ def write_run(result: RunResult, out_dir: Path) -> Path:
 
 
 def load_run(spec: RunSpec, out_dir: Path) -> RunResult | None:
-    """A finished run of `spec` under `out_dir` (same condition, run, seed and duration), else None."""
+    """A finished run of `spec` under `out_dir` (same condition and simulator fields), else None."""
     path = out_dir / spec.relative_path()
     try:
         doc = json.loads(path.read_text())
@@ -333,8 +355,7 @@ def load_run(spec: RunSpec, out_dir: Path) -> RunResult | None:
         return None
     same = (
         meta.get("condition") == spec.condition.name
-        and meta.get("seed") == spec.seed
-        and meta.get("duration_s") == spec.duration_s
+        and meta.get("sim_fields") == json.loads(json.dumps(spec.config_fields()))
         and meta.get("error") is None
         and "metrics" in doc
     )

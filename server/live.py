@@ -17,7 +17,7 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -55,12 +55,13 @@ class LiveRunner:
 
     max_batch_s: the longest stretch of ticks between two yields to the event loop; max_lag_s: simulated
     seconds the run may fall behind before it gives up catching up (it then runs slower than asked, never in
-    bursts).
+    bursts). clock and sleep are injectable for tests.
     """
 
     def __init__(self, *, station: Steppable, speed: float = 1.0, on_frame: Callable[[], None] | None = None,
                  frame_period_s: float = 0.1, max_batch_s: float = 0.02, max_lag_s: float = 0.5,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], Awaitable[None]] = asyncio.sleep) -> None:
         if not (speed > 0.0 and speed < 1e6):
             raise ValueError(f"speed must be a positive factor of real time, got {speed}")
         self._station = station
@@ -70,6 +71,7 @@ class LiveRunner:
         self._max_batch_s = max_batch_s
         self._max_lag_s = max_lag_s
         self._clock = clock
+        self._sleep = sleep
         self.stats = PaceStats()
 
     async def run(self, stop: asyncio.Event) -> None:
@@ -95,7 +97,7 @@ class LiveRunner:
                 self._frame()
                 next_frame = now + self._frame_period_s
             next_tick = wall0 + (self._station.time_s + period - sim0) / self._speed
-            await asyncio.sleep(max(0.0, min(next_tick, next_frame) - self._clock()))
+            await self._sleep(max(0.0, min(next_tick, next_frame) - self._clock()))
 
     def _tick(self) -> None:
         try:
@@ -161,13 +163,15 @@ def url_host(host: str) -> str:
 
 async def serve_station(station, *, host: str = "127.0.0.1", port: int = 8000, viser_port: int = 8080,
                         speed: float = 1.0, frame_period_s: float = 0.1, stop: asyncio.Event | None = None,
-                        on_ready: Callable[[Urls], None] | None = None, handle_signals: bool = True) -> PaceStats:
+                        on_ready: Callable[[Urls, object], None] | None = None,
+                        handle_signals: bool = True) -> PaceStats:
     """Run the ground station (viser page, FastAPI app, paced control ticks) until `stop` is set or
     SIGINT/SIGTERM arrives; then land every MAV and close the back-ends. Returns how the run kept up with
     real time.
 
     `station` is a `server.ground_station.GroundStation` over any list of autopilots (the embedded
-    simulation or PX4 vehicles). on_ready is called once with the URLs when both servers listen.
+    simulation or PX4 vehicles). on_ready(urls, ui) is called once when both servers listen (ui: the
+    `webui.app.OperatorUi`, for callers that inspect the scene).
     """
     from server.api import create_app  # FastAPI/viser load only when serving
     from webui.app import OperatorUi
@@ -186,7 +190,8 @@ async def serve_station(station, *, host: str = "127.0.0.1", port: int = 8000, v
         ui = OperatorUi(actions=station, initial=station.scene_view(), host=host, port=viser_port)
         sock, api_fell_back = bind_port(host, port)
         app = create_app(station, viser_port=ui.port)
-        server = _QuietServer(uvicorn.Config(app, log_level="warning", lifespan="off", ws="websockets-sansio"))
+        config = uvicorn.Config(app, log_level="warning", lifespan="off", ws="websockets-sansio")
+        server = _QuietServer(config)
         serve_task = asyncio.create_task(server.serve(sockets=[sock]))
         while not server.started:
             if serve_task.done():
@@ -196,7 +201,7 @@ async def serve_station(station, *, host: str = "127.0.0.1", port: int = 8000, v
         urls = Urls(api=f"http://{url_host(host)}:{api_port}/", operator=f"http://{url_host(host)}:{ui.port}/",
                     api_fell_back=api_fell_back, viser_fell_back=viser_port not in (0, ui.port))
         if on_ready is not None:
-            on_ready(urls)
+            on_ready(urls, ui)
         runner = LiveRunner(station=station, speed=speed, frame_period_s=frame_period_s,
                             on_frame=lambda: ui.publish(station.scene_view()))
         runner_task = asyncio.create_task(runner.run(stop))
@@ -205,6 +210,8 @@ async def serve_station(station, *, host: str = "127.0.0.1", port: int = 8000, v
         stop.set()
         await runner_task
         stop_task.cancel()
+        if serve_task.done() and not serve_task.cancelled() and serve_task.exception() is not None:
+            raise serve_task.exception()
         return runner.stats
     finally:
         for sig in installed:

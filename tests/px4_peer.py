@@ -1,19 +1,19 @@
 """A MAVLink peer that behaves like PX4 for what skyring uses, over real UDP on 127.0.0.1, for tests.
 
 One `Px4Peer` is one multicopter autopilot: it sends to the ground station's port (MAVSDK listens with
-`udpin://127.0.0.1:PORT`; the peer plays PX4's `udpout` side from its own ephemeral port) and runs its loop in a
-daemon thread in real time, as MAVSDK needs.
+`udpin://127.0.0.1:PORT`; the peer plays PX4's `udpout` side from its own ephemeral port) and runs its loop
+in a daemon thread in real time, as MAVSDK needs.
 
 What it does, the way PX4 v1.16 does it:
 - HEARTBEAT (1 Hz) with autopilot PX4, armed flag, and the PX4 custom mode: main mode in bits 16-23, AUTO
   sub-mode in bits 24-31 (e.g. Hold = AUTO/LOITER = 4/3, Offboard = 6/0, Position = 3/0);
 - LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION at `rate_hz`; EXTENDED_SYS_STATE
-  (landed state); SYS_STATUS (sensor health bits, pre-arm check, battery); GPS_RAW_INT (accuracy); HOME_POSITION
-  (home resets at every arming; the local NED origin stays where it booted); GPS_GLOBAL_ORIGIN on request;
-  AUTOPILOT_VERSION on request;
+  (landed state); SYS_STATUS (sensor health bits, pre-arm check, battery); GPS_RAW_INT (accuracy);
+  HOME_POSITION (home resets at every arming; the local NED origin stays where it booted); GPS_GLOBAL_ORIGIN
+  and AUTOPILOT_VERSION on request;
 - COMMAND_LONG / COMMAND_INT with COMMAND_ACK: arm/disarm, NAV_TAKEOFF (to MIS_TAKEOFF_ALT, then Hold),
-  NAV_LAND (descend at MPC_LAND_SPEED, auto-disarm COM_DISARM_LAND after touch-down), DO_SET_MODE (offboard only
-  after >= 1 s of set-points at > 2 Hz, as PX4 >= 1.14), REQUEST_MESSAGE, SET_MESSAGE_INTERVAL; unknown
+  NAV_LAND (descend at MPC_LAND_SPEED, auto-disarm COM_DISARM_LAND after touch-down), DO_SET_MODE (offboard
+  only after >= 1 s of set-points at > 2 Hz, as PX4 >= 1.14), REQUEST_MESSAGE, SET_MESSAGE_INTERVAL; unknown
   commands are answered UNSUPPORTED;
 - PARAM_REQUEST_READ / PARAM_REQUEST_LIST / PARAM_SET with PX4's byte-wise int32 encoding, for the parameters
   in `DEFAULT_PARAMS`; unknown names are ignored, as PX4 does;
@@ -50,7 +50,8 @@ from pymavlink.dialects.v20 import common as mavlink
 G_MPS2 = 9.81
 
 # PX4 custom main modes and AUTO sub-modes (px4_custom_mode.h).
-MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = 1, 2, 3, 4, 5, 6, 7
+MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO = 1, 2, 3, 4
+MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = 5, 6, 7
 SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
 
 
@@ -170,22 +171,27 @@ class Px4Peer:
     """A simulated PX4 multicopter speaking MAVLink 2 to a ground station at 127.0.0.1:gcs_port.
 
     home: (lat_deg, lon_deg, alt_m) where it boots, which is also its local NED origin unless `origin` says
-    otherwise; start_ned_m: (3,) its boot position in that local frame; params: overrides of DEFAULT_PARAMS.
+    otherwise; start_ned_m: (3,) its boot position in that local frame (when origin is not given);
+    start_yaw_ned_rad: its heading on the ground; params: overrides of DEFAULT_PARAMS; answers_origin: False
+    plays an autopilot that does not answer a GPS_GLOBAL_ORIGIN request.
     """
 
     def __init__(self, *, gcs_port: int, system_id: int = 1, home: tuple[float, float, float] = (
             47.397742, 8.545594, 488.0), origin: tuple[float, float, float] | None = None,
-            start_ned_m=(0.0, 0.0, 0.0), rate_hz: float = 20.0, params: dict[str, float] | None = None,
-            max_accel_mps2: float = 5.0) -> None:
+            start_ned_m=(0.0, 0.0, 0.0), start_yaw_ned_rad: float = 0.0, rate_hz: float = 20.0,
+            params: dict[str, float] | None = None, max_accel_mps2: float = 5.0,
+            answers_origin: bool = True) -> None:
         self.system_id = system_id
         self.origin = tuple(origin if origin is not None else home)
         self.rate_hz = rate_hz
         self.max_accel_mps2 = max_accel_mps2
+        self.answers_origin = answers_origin
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", 0))
         self._sock.setblocking(False)
         self._out = _UdpOut(self._sock, ("127.0.0.1", gcs_port))
-        self._mav = mavlink.MAVLink(self._out, srcSystem=system_id, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
+        self._mav = mavlink.MAVLink(self._out, srcSystem=system_id,
+                                    srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
         self._mav.robust_parsing = True
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -207,7 +213,7 @@ class Px4Peer:
         self._p = start
         self._v = np.zeros(3)
         self._accel = np.zeros(3)
-        self._yaw = 0.0
+        self._yaw = float(start_yaw_ned_rad)
         self._yaw_rate = 0.0
         self._armed = False
         self._mode = PeerMode.HOLD
@@ -318,7 +324,7 @@ class Px4Peer:
         return time.monotonic() - self._t0
 
     def _run(self) -> None:
-        period = 1.0 / 200.0
+        period = 1.0 / 100.0  # physics and message handling; telemetry goes out at rate_hz
         last = self._now()
         next_fast = next_hb = next_slow = next_status = 0.0
         while not self._stop.is_set():
@@ -389,7 +395,8 @@ class Px4Peer:
     def _send_param(self, name: str) -> None:
         value, ptype = self._params[name]
         wire = int_as_param_float(value) if ptype == mavlink.MAV_PARAM_TYPE_INT32 else float(value)
-        self._mav.param_value_send(name.encode(), wire, ptype, len(self._params), list(self._params).index(name))
+        index = list(self._params).index(name)
+        self._mav.param_value_send(name.encode(), wire, ptype, len(self._params), index)
 
     def _on_setpoint(self, msg, now: float) -> None:
         sp = SeenSetpoint(t_s=now, target_system=msg.target_system, target_component=msg.target_component,
@@ -462,10 +469,10 @@ class Px4Peer:
     def _send_requested(self, message_id: int) -> bool:
         if message_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
             self._send_home()
-        elif message_id == mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
+        elif message_id == mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN and self.answers_origin:
             lat, lon, alt = self.origin
-            self._mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1e3)),
-                                             int(self._now() * 1e6))
+            self._mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                             int(round(alt * 1e3)), int(self._now() * 1e6))
         elif message_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             version = (1 << 24) | (16 << 16) | (0 << 8) | 255  # 1.16.0 release
             self._mav.autopilot_version_send(_CAPABILITIES, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
@@ -544,7 +551,8 @@ class Px4Peer:
             target = np.array([self._land_xy[0], self._land_xy[1], self._p[2]])
             return target, zero, None, float(self._params["MPC_LAND_SPEED"][0])
         if self._mode is PeerMode.RTL:
-            target = np.array([self._home_ned[0], self._home_ned[1], min(self._p[2], self._ground_down_m - 5)])
+            cruise_down = min(self._p[2], self._ground_down_m - 5.0)
+            target = np.array([self._home_ned[0], self._home_ned[1], cruise_down])
             if np.linalg.norm(self._p[:2] - self._home_ned[:2]) < 1.0:
                 self._set_mode(PeerMode.LAND, now)
             return target, zero, None, None
@@ -587,7 +595,9 @@ class Px4Peer:
         return float(lat), float(lon), float(alt)
 
     def _send_heartbeat(self) -> None:
-        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self._armed else 0)
+        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if self._armed:
+            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         status = mavlink.MAV_STATE_ACTIVE if self._armed else mavlink.MAV_STATE_STANDBY
         self._mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
                                  self._mode.custom_mode, status)
@@ -599,9 +609,10 @@ class Px4Peer:
         lat, lon, alt = self._geodetic_now()
         home_alt = pymap3d.ned2geodetic(*self._home_ned, *self.origin)[2]
         hdg = int(round(math.degrees(self._yaw) % 360.0 * 100)) % 36000
-        self._mav.global_position_int_send(ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1e3)),
-                                           int(round((alt - home_alt) * 1e3)), int(round(v[0] * 100)),
-                                           int(round(v[1] * 100)), int(round(v[2] * 100)), hdg)
+        self._mav.global_position_int_send(ms, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                           int(round(alt * 1e3)), int(round((alt - home_alt) * 1e3)),
+                                           int(round(v[0] * 100)), int(round(v[1] * 100)),
+                                           int(round(v[2] * 100)), hdg)
         roll, pitch = self._tilt()
         self._mav.attitude_send(ms, roll, pitch, self._yaw, 0.0, 0.0, self._yaw_rate)
         q = _quaternion(roll, pitch, self._yaw)
@@ -633,7 +644,8 @@ class Px4Peer:
     def _send_home(self) -> None:
         lat, lon, alt = pymap3d.ned2geodetic(*self._home_ned, *self.origin)
         self._mav.home_position_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1e3)),
-                                     *self._home_ned, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(self._now() * 1e6))
+                                     *self._home_ned, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                                     int(self._now() * 1e6))
 
 
 def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
@@ -643,3 +655,28 @@ def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, fl
     cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
     return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
             cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+
+
+# What skyring's set-points must look like: local NED position + velocity feed-forward + yaw (accelerations
+# and yaw rate ignored), as MAVSDK's set_position_velocity_ned sends them.
+POSITION_VELOCITY_YAW_MASK = IGNORE_ACCELERATION | IGNORE_YAW_RATE
+
+
+def setpoint_problems(sp: SeenSetpoint, *, system_id: int, max_range_m: float = 1000.0,
+                      max_speed_mps: float = 20.0) -> list[str]:
+    """Everything wrong with one received set-point (empty when it is well-formed for vehicle system_id)."""
+    problems = []
+    if sp.target_system != system_id or sp.target_component != mavlink.MAV_COMP_ID_AUTOPILOT1:
+        problems.append(f"addressed to {sp.target_system}/{sp.target_component}")
+    if sp.frame != mavlink.MAV_FRAME_LOCAL_NED:
+        problems.append(f"frame {sp.frame} is not MAV_FRAME_LOCAL_NED")
+    if sp.type_mask != POSITION_VELOCITY_YAW_MASK:
+        problems.append(f"type mask {sp.type_mask:#x} is not position + velocity + yaw")
+    values = (*sp.position_ned, *sp.velocity_ned, sp.yaw_rad)
+    if not all(math.isfinite(v) for v in values):
+        problems.append(f"non-finite values {values}")
+    elif np.linalg.norm(sp.position_ned) > max_range_m or np.linalg.norm(sp.velocity_ned) > max_speed_mps:
+        problems.append(f"out of range: position {sp.position_ned}, velocity {sp.velocity_ned}")
+    elif not -math.pi - 1e-6 <= sp.yaw_rad <= math.pi + 1e-6:
+        problems.append(f"yaw {sp.yaw_rad} outside [-pi, pi]")
+    return problems

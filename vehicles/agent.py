@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
-
 from controller.formation import FormationController
+
 from controller.messages import (
     ControlOutput,
     Detection,
@@ -36,11 +36,11 @@ from vehicles.autopilot import AutopilotState, Setpoint
 Message = Detection | HorizonPlan
 
 
-class AgentRole(str, Enum):
+class AgentRole(StrEnum):
     """What the mission wants from the agent this tick."""
 
     FORMATION = "formation"  # fly: run the controller, send set-points, publish an in-formation plan
-    AIRBORNE = "airborne"  # in the air but not in formation (taking off, landing, paused): publish a hold plan
+    AIRBORNE = "airborne"  # in the air, not in formation (taking off, landing, paused): publish a hold plan
     GROUND = "ground"  # on the ground: track only, publish no plan
 
 
@@ -76,8 +76,9 @@ class AgentInputs:
 
 @dataclass(frozen=True)
 class AgentCounters:
-    """Cumulative counts: detections fused from the own camera and from teammates, plans received, messages
-    rejected (malformed, own echoes), controller exceptions caught, braking ticks, ticks that used the slot."""
+    """Cumulative counts: detections fused from the own camera and from teammates, plans received,
+    messages rejected (malformed, own echoes), controller exceptions caught, braking ticks, ticks that used
+    the roster slot."""
 
     own_detections_fused: int = 0
     teammate_detections_fused: int = 0
@@ -117,13 +118,13 @@ def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: 
 
 
 class Agent:
-    """The loop of MAV `vehicle_id`: a person-tracker replica, a formation controller, the teammates' plans."""
+    """The loop of MAV `vehicle_id`: a person-tracker replica, a formation controller, teammates' plans."""
 
-    def __init__(self, *, vehicle_id: int, params: ControllerParams = ControllerParams(),
-                 agent_params: AgentParams = AgentParams()) -> None:
+    def __init__(self, *, vehicle_id: int, params: ControllerParams | None = None,
+                 agent_params: AgentParams | None = None) -> None:
         self.vehicle_id = int(vehicle_id)
-        self._params = params
-        self._ap = agent_params
+        self._params = params = params or ControllerParams()
+        self._ap = agent_params or AgentParams()
         self._tracker = PersonTracker(params.tracker)
         self._controller = FormationController(vehicle_id=self.vehicle_id, params=params)
         self._plans: dict[int, HorizonPlan] = {}
@@ -165,8 +166,9 @@ class Agent:
                     own=VehicleState(vehicle_id=self.vehicle_id, stamp_s=now_s, position_m=own.position_m,
                                      velocity_mps=own.velocity_mps, yaw_rad=own.yaw_rad,
                                      position_cov_m2=own.position_cov_m2),
-                    person=person, teammates=teammates, obstacles=inputs.obstacles, formation=inputs.formation,
-                    in_formation=True, preferred_bearing_rad=inputs.slot_bearing_rad if used_slot else None)
+                    person=person, teammates=teammates, obstacles=inputs.obstacles,
+                    formation=inputs.formation, in_formation=True,
+                    preferred_bearing_rad=inputs.slot_bearing_rad if used_slot else None)
                 setpoint = Setpoint(stamp_s=now_s, position_m=control.waypoint_position_m,
                                     velocity_mps=control.waypoint_velocity_mps, yaw_rad=control.yaw_rad)
                 plan = control.plan

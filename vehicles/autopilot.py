@@ -36,9 +36,10 @@ class AutopilotState:
     position_m (3,), velocity_mps (3,), yaw_rad (ENU), roll_rad/pitch_rad (body attitude),
     position_cov_m2 (3, 3) self-localisation covariance; battery_fraction in [0, 1] or None when unknown;
     stamp_s: when this reading was taken (the caller's clock).
-    link_lost: no telemetry for longer than the back-end's limit (PX4: 1 s): the other fields are the last known
-    values and stamp_s says how old they are. released: a pilot or the autopilot's own failsafe took the vehicle
-    out of offboard; skyring does not fight for control and ignores set-points until re-engaged (takeoff).
+    link_lost: no telemetry for longer than the back-end's limit (PX4: 1 s); the other fields are the last
+    known values and stamp_s says how old they are. released: a pilot or the autopilot's own failsafe took the
+    vehicle out of offboard; skyring does not fight for control and ignores set-points until re-engaged
+    (takeoff).
     """
 
     vehicle_id: int

@@ -1,9 +1,9 @@
 """The body-fixed camera of a MAV: pose, pinhole projection, and what it sees of the person.
 
 The camera is rigidly attached to the body, pitched `pitch_down_rad` below the body's forward axis and
-`offset_forward_m` ahead of its centre (paper Sec. II and its Gazebo set-up), so its view tilts with the body's
-roll and pitch and turns with its yaw. Image convention: u to the right, v down, pixel (0, 0) the top-left
-corner; camera frame x right, y down, z along the optical axis.
+`offset_forward_m` ahead of its centre (paper Sec. II and its Gazebo set-up), so its view tilts with the
+body's roll and pitch and turns with its yaw. Image convention: u to the right, v down, pixel (0, 0) the
+top-left corner; camera frame x right, y down, z along the optical axis.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from controller.messages import Obstacle
 
 @dataclass(frozen=True)
 class CameraParams:
-    """Paper intrinsics (2040 x 1086 px, fx = fy = 1470.33 px, principal point (1020.5, 543.5) px) and mount."""
+    """Paper intrinsics (2040 x 1086 px, fx = fy = 1470.33 px, principal point (1020.5, 543.5) px) and
+    mount (45 degrees down, 0.18 m ahead of the body centre)."""
 
     width_px: int = 2040
     height_px: int = 1086
@@ -70,7 +71,8 @@ def attitude_from_acceleration(*, acceleration_mps2: np.ndarray, yaw_rad: float,
 
 @dataclass(frozen=True, eq=False)
 class CameraPose:
-    """position_m (3,) of the optical centre; rotation (3, 3) world-to-camera (rows: camera x, y, z in ENU)."""
+    """position_m (3,) of the optical centre; rotation (3, 3) world-to-camera (rows: camera x, y, z in
+    ENU)."""
 
     position_m: np.ndarray
     rotation: np.ndarray

@@ -1,10 +1,11 @@
 """Frames at the PX4 edge: ENU <-> NED, yaw conventions, and geodetic <-> the team's ENU frame.
 
 The team flies in one local ENU frame (x east, y north, z up) whose origin is a shared geodetic reference
-(`--origin`, or the first vehicle's home). Every PX4 vehicle reports and accepts positions in its own local NED
-frame, whose origin is its estimator origin (GPS_GLOBAL_ORIGIN, where it booted; not "home", which moves at
-every arming). Both frames are tangent planes of the WGS-84 ellipsoid, so the map from one vehicle's local NED
-to the team ENU is a rigid transform, computed once per vehicle (`LocalFrame`). pymap3d supplies the ellipsoid.
+(`--origin`, or the first vehicle's home). Every PX4 vehicle reports and accepts positions in its own local
+NED frame, whose origin is its estimator origin (GPS_GLOBAL_ORIGIN, where it booted; not "home", which moves
+at every arming). Both frames are tangent planes of the WGS-84 ellipsoid, so the map from one vehicle's local
+NED to the team ENU is a rigid transform, computed once per vehicle (`LocalFrame`); pymap3d supplies the
+ellipsoid.
 
 Altitudes are treated as heights on the ellipsoid. PX4 reports AMSL; using AMSL for every point shifts all of
 them by the local geoid height together, which changes relative geometry by about 1e-5 (a millimetre over
@@ -28,7 +29,7 @@ _SWAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 @dataclass(frozen=True)
 class GeodeticPoint:
-    """A WGS-84 position: latitude_deg in [-90, 90], longitude_deg in [-180, 180], altitude_m (see module doc)."""
+    """A WGS-84 position: latitude_deg in [-90, 90], longitude_deg in [-180, 180], altitude_m (module doc)."""
 
     latitude_deg: float
     longitude_deg: float
@@ -45,7 +46,7 @@ class GeodeticPoint:
 
 
 def parse_geodetic(text: str) -> GeodeticPoint:
-    """Parse "lat,lon,alt" (degrees, degrees, metres), as given to `--origin`; raise ValueError with the reason."""
+    """Parse "lat,lon,alt" (degrees, degrees, metres) as given to `--origin`; ValueError says what is off."""
     parts = [p.strip() for p in text.split(",")]
     if len(parts) != 3:
         raise ValueError(f"expected 'lat,lon,alt' (degrees, degrees, metres), got {text!r}")
@@ -125,7 +126,7 @@ class LocalFrame:
 
     @classmethod
     def from_origin(cls, *, local_origin: GeodeticPoint, reference: GeodeticPoint) -> LocalFrame:
-        """The transform for a vehicle whose local NED origin is `local_origin`, in the frame at `reference`."""
+        """The transform for a vehicle whose local NED origin is `local_origin`, in the frame at reference."""
         ned_from_ecef = _SWAP @ ecef_to_enu_rotation(local_origin)
         rotation = ecef_to_enu_rotation(reference) @ ned_from_ecef.T
         return cls(rotation=rotation, offset_m=geodetic_to_enu(local_origin, reference=reference))

@@ -49,7 +49,8 @@ class LinkParams:
 
 @dataclass(frozen=True)
 class LinkStats:
-    """Counts of (message, receiver) pairs: sent, delivered (received so far), dropped, pending (in flight)."""
+    """Counts of (message, receiver) pairs: sent, delivered (received so far), dropped, pending (in
+    flight)."""
 
     sent: int
     delivered: int

@@ -5,7 +5,7 @@ through `World` and to the radio through `Links`.
 It holds one agent per vehicle, the operator's formation parameters, static and virtual obstacles, and a phase
 machine per vehicle:
 
-    IDLE --(formation enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
+    IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
 
 A MAV that is landing or landed has left formation control: it publishes plans marked not-in-formation (then
@@ -20,19 +20,20 @@ import math
 import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 from controller.messages import HorizonPlan, Obstacle, PersonEstimate, SolveStatus
 from controller.params import ControllerParams, FormationParams
 from controller.tracker import TrackerStats
 from vehicles.agent import Agent, AgentCounters, AgentInputs, AgentOutputs, AgentParams, AgentRole
 from vehicles.autopilot import Autopilot, AutopilotState, FlightMode, Setpoint
+from vehicles.link_loss import silent_vehicle_obstacle
 from vehicles.links import Links
 from vehicles.person import PERSON_CENTRE_HEIGHT_M, PersonTruth
 from vehicles.world import World
 
 
-class Phase(str, Enum):
+class Phase(StrEnum):
     """Where a vehicle is in the mission."""
 
     IDLE = "idle"
@@ -66,8 +67,8 @@ class VehicleSnapshot:
     autopilot: latest telemetry; plan: the latest horizon plan; person: this MAV's fused estimate (its
     position_cov_m2 is the ellipsoid); setpoint: last set-point sent; status/solver_time_s: the controller's
     last result; tick_s: wall time of the last agent tick (None without a clock); link_age_s: age of the
-    telemetry; teammates_known: teammates whose plans are fresh; used_slot: steering to the roster slot because
-    teammates are unheard; fault: last fault line.
+    telemetry; teammates_known: teammates whose plans are fresh; used_slot: steering to the roster slot
+    because teammates are unheard; fault: last fault line.
     """
 
     vehicle_id: int
@@ -89,8 +90,8 @@ class VehicleSnapshot:
 
 @dataclass(frozen=True)
 class MissionCounters:
-    """Rejected inputs, summed over the team: operator actions refused; detections the trackers ignored (gated,
-    stale, invalid); malformed or misaddressed messages; controller exceptions; braking ticks."""
+    """Rejected inputs, summed over the team: operator actions refused; detections the trackers ignored
+    (gated, stale, invalid); malformed or misaddressed messages; controller exceptions; braking ticks."""
 
     rejected_actions: int = 0
     rejected_detections: int = 0
@@ -132,10 +133,12 @@ class Mission:
     """A team of vehicles following the person. Drive it with `step(now_s)` at the control rate."""
 
     def __init__(self, *, autopilots: Sequence[Autopilot], world: World, links: Links,
-                 controller_params: ControllerParams = ControllerParams(),
-                 formation: FormationParams = FormationParams(), virtual_obstacles: Sequence[Obstacle] = (),
-                 formation_enabled: bool = True, params: MissionParams = MissionParams(),
-                 agent_params: AgentParams = AgentParams(), clock: Callable[[], float] | None = None) -> None:
+                 controller_params: ControllerParams | None = None, formation: FormationParams | None = None,
+                 virtual_obstacles: Sequence[Obstacle] = (), formation_enabled: bool = True,
+                 params: MissionParams | None = None, agent_params: AgentParams | None = None,
+                 clock: Callable[[], float] | None = None) -> None:
+        controller_params = controller_params or ControllerParams()
+        formation = formation or FormationParams()
         ids = [a.vehicle_id for a in autopilots]
         if not ids or len(set(ids)) != len(ids):
             raise ValueError("a mission needs at least one autopilot, with unique vehicle ids")
@@ -145,7 +148,7 @@ class Mission:
         self._world = world
         self._links = links
         self._cparams = controller_params
-        self._params = params
+        self._params = params or MissionParams()
         self._check_formation(formation)
         self._formation = formation
         self._virtual: dict[str, Obstacle] = {}
@@ -247,16 +250,29 @@ class Mission:
         for v in self._vehicles.values():
             v.state = v.autopilot.state()
             self._advance_phase(v, now_s)
-        roster = [vid for vid, v in self._vehicles.items() if v.phase in (Phase.TAKEOFF, Phase.FORMATION)]
+        # A vehicle whose link is lost gets no agent tick (nothing would reach it) and leaves the roster; its
+        # teammates avoid it around its last plan, the wider the longer it is silent (vehicles/link_loss.py).
+        silent = {vid for vid, v in self._vehicles.items() if v.state is not None and v.state.link_lost}
+        obstacles += tuple(silent_vehicle_obstacle(state=self._vehicles[vid].state, now_s=now_s,
+                                                   plan=self._vehicles[vid].last.plan
+                                                   if self._vehicles[vid].last is not None else None)
+                           for vid in sorted(silent))
+        roster = [vid for vid, v in self._vehicles.items() if v.phase in (Phase.TAKEOFF, Phase.FORMATION)
+                  and vid not in silent and not (v.state is not None and v.state.released)]
         k = len(roster)
         for vid, v in self._vehicles.items():
+            if vid in silent:
+                self._world.detections(vid)  # stale frames and messages are dropped, not queued up
+                self._links.receive(now_s, vid)
+                continue
             role = self._role(v)
             slot = None
             if vid in roster:
                 slot = self._params.slot_offset_rad + 2.0 * math.pi * roster.index(vid) / k
             inputs = AgentInputs(own=v.state, detections=self._world.detections(vid),
                                  received=self._links.receive(now_s, vid), obstacles=obstacles,
-                                 formation=self._formation, role=role, slot_bearing_rad=slot, slot_count=max(k, 1))
+                                 formation=self._formation, role=role, slot_bearing_rad=slot,
+                                 slot_count=max(k, 1))
             t0 = self._clock() if self._clock is not None else None
             out = v.agent.tick(now_s, inputs)
             if t0 is not None:
@@ -271,7 +287,8 @@ class Mission:
     def snapshot(self) -> MissionSnapshot:
         """The mission now, for displays, logs and metrics."""
         vehicles = []
-        totals = {"rejected_detections": 0, "rejected_messages": 0, "controller_errors": 0, "braking_ticks": 0}
+        totals = dict.fromkeys(("rejected_detections", "rejected_messages", "controller_errors",
+                                "braking_ticks"), 0)
         k = 0
         for vid, v in self._vehicles.items():
             out = v.last
@@ -356,8 +373,10 @@ class Mission:
                 v.autopilot.land()
 
     def _role(self, v: _Vehicle) -> AgentRole:
-        if v.phase == Phase.FORMATION and self._enabled:
+        released = v.state is not None and v.state.released  # a pilot has it: avoid it, do not steer it
+        if v.phase == Phase.FORMATION and self._enabled and not released:
             return AgentRole.FORMATION
-        if v.phase in (Phase.TAKEOFF, Phase.FORMATION, Phase.LANDING) and v.state is not None and v.state.in_air:
+        airborne = v.state is not None and v.state.in_air
+        if airborne and v.phase in (Phase.TAKEOFF, Phase.FORMATION, Phase.LANDING):
             return AgentRole.AIRBORNE
         return AgentRole.GROUND

@@ -23,6 +23,7 @@ PAPER_WALK_SPEED_MPS = 0.7
 # the MPC's arena of +-20 m, so skyring scales the path to an 11 m radius: person + d_des + 1 m margin < 20 m.
 PAPER_PATH_RADIUS_M = 11.0
 RANDOM_ARENA_RADIUS_M = 11.0
+PERSON_MODES = ("paper", "random", "still")  # the models below, by name
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,8 +81,8 @@ def paper_path(*, radius_m: float = PAPER_PATH_RADIUS_M, points_per_m: float = 4
     """(M, 2) the paper's walk as a dense closed polyline from the origin back to it.
 
     Shape in units of the radius R (METHOD.md "Simulation", scaled from R = 15 m): a sine
-    (x, R/3 sin(2 pi x / R)) for x in 0..R; a clockwise arc of radius R about the origin from (R, 0) to (0, -R);
-    an oscillating return (R/5 sin(4 pi y / R), y) from y = -R to 0.
+    (x, R/3 sin(2 pi x / R)) for x in 0..R; a clockwise arc of radius R about the origin from (R, 0) to
+    (0, -R); an oscillating return (R/5 sin(4 pi y / R), y) from y = -R to 0.
     """
     if not (np.isfinite(radius_m) and radius_m > 0):
         raise ValueError(f"radius_m must be positive, got {radius_m}")
@@ -97,7 +98,8 @@ def paper_path(*, radius_m: float = PAPER_PATH_RADIUS_M, points_per_m: float = 4
 
 
 class PathPerson:
-    """A person who stands still for `start_delay_s`, then walks `path_xy_m` (M, 2) at `speed_mps`, looping."""
+    """A person who stands still for `start_delay_s`, then walks `path_xy_m` (M, 2) at `speed_mps`,
+    looping."""
 
     def __init__(self, *, path_xy_m: np.ndarray, speed_mps: float = PAPER_WALK_SPEED_MPS,
                  start_delay_s: float = STAND_STILL_S) -> None:

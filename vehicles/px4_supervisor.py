@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 from vehicles.autopilot import FlightMode
 
 
-class Engagement(str, Enum):
+class Engagement(StrEnum):
     """skyring's relationship with one vehicle."""
 
     IDLE = "idle"  # on the ground, or airborne but never engaged by this ground station
@@ -36,7 +36,7 @@ class Engagement(str, Enum):
     RELEASED = "released"  # a pilot or PX4 took it out of offboard: skyring does not fight
 
 
-class Command(str, Enum):
+class Command(StrEnum):
     """What the back-end must ask PX4 for."""
 
     TAKEOFF = "takeoff"  # set the takeoff altitude, arm, take off
@@ -60,7 +60,8 @@ class SupervisorParams:
 
     def __post_init__(self) -> None:
         if not (0.0 < self.hold_after_s < self.land_after_s and math.isfinite(self.land_after_s)):
-            raise ValueError(f"need 0 < hold_after_s < land_after_s, got {self.hold_after_s}, {self.land_after_s}")
+            raise ValueError(f"need 0 < hold_after_s < land_after_s, got {self.hold_after_s} and "
+                             f"{self.land_after_s}")
         for name in ("prestream_s", "retry_after_s", "mode_grace_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
@@ -84,7 +85,7 @@ _EXPECTED_MODE = {Command.START_OFFBOARD: FlightMode.OFFBOARD, Command.HOLD: Fli
 
 
 class OffboardSupervisor:
-    """One vehicle's engagement state machine. Requests are recorded at once and acted on at the next `step`."""
+    """One vehicle's engagement state machine; requests are recorded at once and acted on at the next step."""
 
     def __init__(self, params: SupervisorParams = SupervisorParams()) -> None:
         self.params = params
@@ -100,8 +101,10 @@ class OffboardSupervisor:
         self._requests: list[tuple[str, float | None]] = []
         self._last_command: Command | None = None
         self._last_command_s = -math.inf
+        self._engaged_from = FlightMode.HOLD  # the mode a (re-)engagement started from: not a takeover
+        self._engaged_at_s = -math.inf  # set-points reach the vehicle from then on (pre-streaming counts)
 
-    # ---- inputs ---------------------------------------------------------------------------------------------
+    # ---- inputs ------------------------------------------------------------------------------------------
     def request_takeoff(self, height_m: float) -> None:
         self._requests.append(("takeoff", height_m))
 
@@ -128,7 +131,7 @@ class OffboardSupervisor:
         if command is Command.TAKEOFF and self.engagement is Engagement.TAKING_OFF:
             self.engagement = Engagement.IDLE
 
-    # ---- outputs --------------------------------------------------------------------------------------------
+    # ---- outputs -----------------------------------------------------------------------------------------
     @property
     def forwarding(self) -> bool:
         """Whether the agent's set-points go to the vehicle now (pre-streaming or following)."""
@@ -137,6 +140,11 @@ class OffboardSupervisor:
     @property
     def released(self) -> bool:
         return self.engagement is Engagement.RELEASED
+
+    @property
+    def pending(self) -> bool:
+        """Requests recorded but not yet acted on (the next `step` will)."""
+        return bool(self._requests)
 
     def setpoint_age_s(self, now_s: float) -> float:
         """Seconds since the last agent set-point (inf before the first)."""
@@ -160,7 +168,7 @@ class OffboardSupervisor:
         command = handler(obs)
         return self._issue(command, obs.now_s) if command is not None else None
 
-    # ---- internals ------------------------------------------------------------------------------------------
+    # ---- internals ---------------------------------------------------------------------------------------
     def _issue(self, command: Command, now_s: float) -> Command:
         self._last_command, self._last_command_s = command, now_s
         return command
@@ -168,10 +176,12 @@ class OffboardSupervisor:
     def _in_grace(self, now_s: float) -> bool:
         return now_s - self._last_command_s < self.params.mode_grace_s
 
+    def _retry_time(self, now_s: float) -> bool:
+        return now_s - self._last_command_s >= self.params.retry_after_s + self.params.mode_grace_s
+
     def _due_retry(self, command: Command, obs: Observation) -> bool:
-        """The last command was `command`, its mode has not shown, and it is time to send it again."""
-        return (obs.mode is not _EXPECTED_MODE[command] and not obs.link_lost
-                and obs.now_s - self._last_command_s >= self.params.retry_after_s + self.params.mode_grace_s)
+        """The mode `command` asks for has not shown after the grace and the retry delay: send it again."""
+        return obs.mode is not _EXPECTED_MODE[command] and not obs.link_lost and self._retry_time(obs.now_s)
 
     def _apply_requests(self, obs: Observation) -> Command | None:
         command = None
@@ -198,7 +208,7 @@ class OffboardSupervisor:
                 self.takeoff_height_m = value
                 self.released_reason = None
                 if obs.in_air and obs.armed:
-                    self.engagement = Engagement.ENGAGING  # re-engage an airborne vehicle
+                    self._engage(obs, from_mode=obs.mode)  # re-engage an airborne vehicle
                     self._streamed_since_engaged = False
                 else:
                     self.engagement = Engagement.TAKING_OFF
@@ -210,6 +220,12 @@ class OffboardSupervisor:
         """The vehicle is in a mode skyring did not ask for (after the grace for telemetry to catch up)."""
         return (obs.mode not in allowed and obs.mode is not FlightMode.UNKNOWN and not obs.link_lost
                 and not self._in_grace(obs.now_s))
+
+    def _engage(self, obs: Observation, *, from_mode: FlightMode = FlightMode.HOLD) -> None:
+        """Start forwarding set-points (pre-streaming); offboard follows after prestream_s of them."""
+        self.engagement = Engagement.ENGAGING
+        self._engaged_from = from_mode
+        self._engaged_at_s = obs.now_s
 
     def _release(self, obs: Observation) -> None:
         self.engagement = Engagement.RELEASED
@@ -223,7 +239,7 @@ class OffboardSupervisor:
 
     def _taking_off(self, obs: Observation) -> Command | None:
         if obs.in_air and obs.mode is FlightMode.HOLD and not self._in_grace(obs.now_s):
-            self.engagement = Engagement.ENGAGING  # PX4 finished the takeoff and holds
+            self._engage(obs)  # PX4 finished the takeoff and holds
             return None
         if self._foreign_mode(obs, (FlightMode.TAKEOFF, FlightMode.HOLD, FlightMode.READY)):
             self._release(obs)
@@ -236,15 +252,14 @@ class OffboardSupervisor:
         if obs.mode is FlightMode.OFFBOARD:
             self.engagement = Engagement.FOLLOWING
             return None
-        if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD)):
+        if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD, self._engaged_from)):
             self._release(obs)
             return None
         if self._streamed_since_engaged and self.setpoint_age_s(obs.now_s) > self.params.land_after_s:
             return self._watchdog_land()
         if (self._fresh(obs.now_s) and not obs.link_lost
-                and obs.now_s - self._stream_start_s >= self.params.prestream_s
-                and (self._last_command is not Command.START_OFFBOARD
-                     or obs.now_s - self._last_command_s >= self.params.retry_after_s + self.params.mode_grace_s)):
+                and obs.now_s - max(self._stream_start_s, self._engaged_at_s) >= self.params.prestream_s
+                and (self._last_command is not Command.START_OFFBOARD or self._retry_time(obs.now_s))):
             return Command.START_OFFBOARD
         return None
 
@@ -267,7 +282,7 @@ class OffboardSupervisor:
             self._release(obs)
             return None
         if self._fresh(obs.now_s):
-            self.engagement = Engagement.ENGAGING  # the agent is back: pre-stream, then offboard again
+            self._engage(obs)  # the agent is back: pre-stream, then offboard again
             return None
         if self._due_retry(Command.HOLD, obs):
             return Command.HOLD
@@ -278,7 +293,7 @@ class OffboardSupervisor:
             self._release(obs)
             return None
         if self._fresh(obs.now_s) and self._last_setpoint_s > self._last_command_s:
-            self.engagement = Engagement.ENGAGING  # set-points after the hold: follow them again
+            self._engage(obs)  # set-points after the hold: follow them again
             return None
         if self._due_retry(Command.HOLD, obs):
             return Command.HOLD

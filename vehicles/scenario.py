@@ -20,12 +20,11 @@ from vehicles.agent import AgentParams
 from vehicles.gps_drift import DriftParams, GpsDrift
 from vehicles.links import LinkParams, SimLinks
 from vehicles.mission import Mission, MissionParams
-from vehicles.person import PathPerson, PersonModel, RandomPerson, StillPerson, paper_path
+from vehicles.person import PERSON_MODES, PathPerson, PersonModel, RandomPerson, StillPerson, paper_path
 from vehicles.sim_autopilot import AirframeParams, SimAutopilot
 from vehicles.trees import TreeSpec, paper_trees, random_trees
 from vehicles.world import DetectorParams, SimWorld
 
-PERSON_MODES = ("paper", "random", "still")
 START_LAYOUTS = ("ring", "cluster")
 START_CLEARANCE_M = 2.0  # a start spot keeps this much from any trunk surface
 CLUSTER_SPACING_M = 2.5  # neighbours on the launch arc of the "cluster" layout
@@ -37,8 +36,8 @@ class Scenario:
 
     vehicles: K >= 1; seed; method; trees: "paper", "none" or N random; person: paper | random | still;
     comm_loss in [0, 1]; latency_s: link latency (plus up to jitter_s); start: "ring" (on the ground at the
-    roster slots, d_des from the person, as a crew would set them out) or "cluster" (side by side, 2.5 m apart,
-    south of the person: the team has to spread out); gps_drift: simulate self-localisation drift.
+    roster slots, d_des from the person, as a crew would set them out) or "cluster" (side by side, 2.5 m
+    apart, south of the person: the team has to spread out); gps_drift: simulate self-localisation drift.
     """
 
     vehicles: int = 3
@@ -94,8 +93,8 @@ def _clearance(xy: np.ndarray, obstacles: tuple[Obstacle, ...]) -> float:
 
 def start_positions(*, count: int, layout: str, d_des_m: float, person_xy_m: np.ndarray,
                     obstacles: tuple[Obstacle, ...] = ()) -> np.ndarray:
-    """(count, 3) ground positions of the MAVs, d_des_m from the person, each turned along the circle in 2-degree
-    steps (alternating sides, up to 40 degrees) until it keeps START_CLEARANCE_M from every trunk."""
+    """(count, 3) ground positions of the MAVs, d_des_m from the person, each turned along the circle in
+    2-degree steps (alternating sides, up to 40 degrees) until it keeps START_CLEARANCE_M from every trunk."""
     if layout == "ring":
         bearings = [2.0 * math.pi * k / count for k in range(count)]
     else:
@@ -121,8 +120,8 @@ def _person(mode: str, rng: np.random.Generator) -> PersonModel:
 
 
 def build_sim(scenario: Scenario, *, controller_params: ControllerParams | None = None,
-              mission_params: MissionParams = MissionParams(), agent_params: AgentParams = AgentParams(),
-              airframe: AirframeParams = AirframeParams(), detector: DetectorParams = DetectorParams(),
+              mission_params: MissionParams | None = None, agent_params: AgentParams | None = None,
+              airframe: AirframeParams | None = None, detector: DetectorParams | None = None,
               clock: Callable[[], float] | None = None) -> SimSetup:
     """Build the world and the mission for `scenario`. controller_params defaults to the method's defaults;
     clock (e.g. time.perf_counter) is only used to time agent ticks."""
@@ -155,13 +154,15 @@ def build_sim(scenario: Scenario, *, controller_params: ControllerParams | None 
         to_person = person_xy - start[:2]
         autopilots.append(SimAutopilot(
             vehicle_id=vid, start_position_m=start, start_yaw_rad=math.atan2(to_person[1], to_person[0]),
-            drift=GpsDrift(np.random.default_rng(drift_ss), drift_params), params=airframe))
+            drift=GpsDrift(np.random.default_rng(drift_ss), drift_params),
+            params=airframe or AirframeParams()))
         rngs[vid] = np.random.default_rng(detector_ss)
-    world = SimWorld(person=person, obstacles=trees, bodies=autopilots, rngs=rngs, detector=detector,
-                     physics_step_s=scenario.physics_step_s)
+    world = SimWorld(person=person, obstacles=trees, bodies=autopilots, rngs=rngs,
+                     detector=detector or DetectorParams(), physics_step_s=scenario.physics_step_s)
     links = SimLinks(vehicle_ids=ids, rng=np.random.default_rng(links_ss), params=LinkParams(
         loss=scenario.comm_loss, latency_s=scenario.latency_s, jitter_s=scenario.jitter_s))
     mission = Mission(autopilots=autopilots, world=world, links=links, controller_params=cparams,
-                      formation=scenario.formation, params=mission_params, agent_params=agent_params, clock=clock)
-    return SimSetup(scenario=scenario, mission=mission, world=world, autopilots=tuple(autopilots), links=links,
-                    person=person)
+                      formation=scenario.formation, params=mission_params, agent_params=agent_params,
+                      clock=clock)
+    return SimSetup(scenario=scenario, mission=mission, world=world, autopilots=tuple(autopilots),
+                    links=links, person=person)

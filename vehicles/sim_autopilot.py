@@ -26,7 +26,8 @@ from vehicles.gps_drift import GpsDrift
 
 @dataclass(frozen=True)
 class AirframeParams:
-    """Gains (1/s), limits (m/s, m/s^2, rad/s), lags and timings (s) of the simulated vehicle and autopilot."""
+    """Gains (1/s), limits (m/s, m/s^2, rad/s), lags and timings (s) of the simulated vehicle and its
+    autopilot."""
 
     position_gain_xy: float = 0.95
     position_gain_z: float = 1.0
@@ -187,6 +188,10 @@ class SimAutopilot:
     @property
     def true_position_m(self) -> np.ndarray:
         return np.array(self._pos)
+
+    @property
+    def in_air(self) -> bool:
+        return self._in_air
 
     def advance(self, now_s: float) -> None:
         """Integrate to now_s in steps of at most physics_step_s."""

@@ -34,7 +34,8 @@ class TreeSpec:
         try:
             n = int(t)
         except ValueError:
-            raise ValueError(f"trees must be 'paper', 'none' or a number of random trees, got {text!r}") from None
+            raise ValueError(f"trees must be 'paper', 'none' or a number of random trees, "
+                             f"got {text!r}") from None
         if not 0 <= n <= 200:
             raise ValueError(f"the number of random trees must be between 0 and 200, got {n}")
         return cls(kind="random", count=n)

@@ -78,8 +78,9 @@ class TelemetryBody:
 @dataclass(frozen=True)
 class DetectorParams:
     """rate_hz: frames per second per camera; noise: the measurement model's spherical noise;
-    add_pose_covariance: a world-frame detection's covariance includes the MAV's self-localisation covariance
-    (its GPS drift is unknown to it, so without this, teammates' detections disagree beyond their covariance)."""
+    add_pose_covariance: a world-frame detection's covariance includes the MAV's self-localisation
+    covariance (its GPS drift is unknown to it, so without this, teammates' detections disagree beyond their
+    covariance)."""
 
     rate_hz: float = 4.0
     noise: NoiseParams = field(default_factory=NoiseParams)
@@ -104,8 +105,10 @@ class SimWorld:
     """
 
     def __init__(self, *, person: PersonModel, obstacles: Sequence[Obstacle], bodies: Sequence[Body],
-                 rngs: Mapping[int, np.random.Generator], camera: CameraParams = CameraParams(),
-                 detector: DetectorParams = DetectorParams(), physics_step_s: float = 0.01) -> None:
+                 rngs: Mapping[int, np.random.Generator], camera: CameraParams | None = None,
+                 detector: DetectorParams | None = None, physics_step_s: float = 0.01) -> None:
+        camera = camera or CameraParams()
+        detector = detector or DetectorParams()
         if not (detector.rate_hz > 0 and physics_step_s > 0):
             raise ValueError("detector rate and physics step must be positive")
         self._person = person

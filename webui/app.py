@@ -7,6 +7,8 @@ atomically.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import threading
 
 import viser
@@ -19,18 +21,22 @@ from webui.view import OperatorActions, SceneView
 class OperatorUi:
     """Owns the viser server, the scene renderer and the control panel.
 
-    host/port: where viser listens (port 0 picks a free port; a busy port makes viser take the next free one:
-    read `port` for the real one). sigma: size of the covariance ellipsoid in standard deviations.
+    host/port: where viser listens (port 0 picks a free port; a busy port makes viser take the next free
+    one: read `port` for the real one). sigma: size of the covariance ellipsoid in standard deviations.
+    shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate).
     """
 
     def __init__(self, *, actions: OperatorActions, initial: SceneView, host: str = "127.0.0.1",
-                 port: int = 8080, sigma: float = 2.0) -> None:
-        self.server = viser.ViserServer(host=host, port=port, label="skyring ground station", verbose=False)
-        self.server.gui.configure_theme(control_width="large", show_share_button=False, show_logo=False,
+                 port: int = 8080, sigma: float = 2.0, shadows: bool = False) -> None:
+        with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own URL box; callers print ours
+            self.server = viser.ViserServer(host=host, port=port, label="skyring ground station",
+                                            verbose=False)
+        self.server.gui.configure_theme(control_width="medium", show_share_button=False, show_logo=False,
                                         dark_mode=False)
-        self.server.initial_camera.position = (0.0, -38.0, 30.0)
-        self.server.initial_camera.look_at = (0.0, 0.0, 2.0)
+        self.server.initial_camera.position = (9.0, -34.0, 30.0)
+        self.server.initial_camera.look_at = (9.0, 0.0, 0.0)
         self.server.initial_camera.up = (0.0, 0.0, 1.0)
+        self.server.scene.configure_default_lights(cast_shadow=shadows)
         self._lock = threading.Lock()
         self.scene = SceneRenderer(self.server.scene, sigma=sigma)
         self.panel = OperatorPanel(self.server, actions, initial)

@@ -45,7 +45,8 @@ def status_line(view: SceneView) -> str:
     """Markdown summary at the top of the panel: time, formation state and the team's size in formation."""
     flying = sum(v.in_formation for v in view.vehicles)
     state = "running" if view.formation_enabled else "stopped (holding)"
-    return (f"t = {view.time_s:.1f} s · formation {state} · {flying}/{len(view.vehicles)} MAVs in formation  \n"
+    return (f"t = {view.time_s:.1f} s · formation {state} · "
+            f"{flying}/{len(view.vehicles)} MAVs in formation  \n"
             f"d_des {view.formation.d_des_m:.1f} m · h_des {view.formation.h_des_m:.1f} m")
 
 
@@ -60,6 +61,7 @@ class OperatorPanel:
         self._pending_clicks: dict[int, float] = {}  # client id -> radius of the obstacle to place
         self._click_registered = False
         self._view = initial
+        self._shown_formation = initial.formation
         self._plot_every = plot_every
         self._refreshes = 0
         self._history: deque[tuple[float, float, float]] = deque()
@@ -93,9 +95,9 @@ class OperatorPanel:
             self._obstacle_list = gui.add_markdown("none")
         self._obstacle_buttons: dict[str, Any] = {}
         with gui.add_folder("Plots"):
-            self._trace_plot = gui.add_uplot(*_plot_args("fused covariance trace (m^2)", (200, 140, 0)),
+            self.trace_plot = gui.add_uplot(*_plot_args("fused covariance trace (m^2)", (200, 140, 0)),
                                              title="Fused position covariance trace", aspect=2.0)
-            self._error_plot = gui.add_uplot(*_plot_args("tracking error (m)", (200, 40, 40)),
+            self.error_plot = gui.add_uplot(*_plot_args("tracking error (m)", (200, 40, 40)),
                                              title="Tracking error (simulation)", aspect=2.0)
         self.refresh(initial)
 
@@ -107,8 +109,8 @@ class OperatorPanel:
         self._status.content = status_line(view)
         _set_range(self._d_des, view.d_des_range_m.low, view.d_des_range_m.high)
         _set_range(self._h_des, view.h_des_range_m.low, view.h_des_range_m.high)
-        self._d_des.value = view.formation.d_des_m  # no-op when equal; programmatic updates carry no client
-        self._h_des.value = view.formation.h_des_m
+        if view.formation != self._shown_formation:  # changed elsewhere (the API, another client)
+            self._show_formation(view)
         for vehicle in view.vehicles:
             self._refresh_card(vehicle)
         self._refresh_obstacles(view)
@@ -129,7 +131,7 @@ class OperatorPanel:
         text = vehicle_card(vehicle)
         if card["text"].content != text:
             card["text"].content = text
-        releasable = vehicle.phase.lower() in ("landing", "landed")
+        releasable = vehicle.phase.lower() == "landed"
         if card["release"].visible != releasable:
             card["release"].visible = releasable
 
@@ -152,6 +154,8 @@ class OperatorPanel:
                 self._obstacle_buttons[obstacle_id] = button
 
     def _record(self, view: SceneView) -> None:
+        if self._history and self._history[-1][0] >= view.time_s:  # the same instant again: nothing new
+            return
         estimate = view.person_estimate
         trace = estimate.position_cov_trace_m2 if estimate is not None else math.nan
         error = view.tracking_error_m if view.tracking_error_m is not None else math.nan
@@ -162,8 +166,8 @@ class OperatorPanel:
         if self._refreshes % self._plot_every:
             return
         t, tr, err = (np.array(c, dtype=float) for c in zip(*self._history, strict=True))
-        self._trace_plot.data = (t, tr)
-        self._error_plot.data = (t, err)
+        self.trace_plot.data = (t, tr)
+        self.error_plot.data = (t, err)
 
     # ---- operator input ------------------------------------------------------------------------------------
 
@@ -189,8 +193,14 @@ class OperatorPanel:
         d_des, h_des = float(self._d_des.value), float(self._h_des.value)
         ok = self._run(event.client, lambda: self._actions.set_formation(d_des_m=d_des, h_des_m=h_des), None)
         if not ok:
-            self._d_des.value = self._view.formation.d_des_m
-            self._h_des.value = self._view.formation.h_des_m
+            self._show_formation(self._view)
+
+    def _show_formation(self, view: SceneView) -> None:
+        """Put the ground station's values in the inputs (programmatic updates carry no client: not re-sent).
+        """
+        self._shown_formation = view.formation
+        self._d_des.value = view.formation.d_des_m
+        self._h_des.value = view.formation.h_des_m
 
     def _on_add_obstacle(self, event: viser.GuiEvent) -> None:
         if event.client is None:
@@ -213,8 +223,8 @@ class OperatorPanel:
             return
         point = ground_point(np.asarray(event.ray_origin), np.asarray(event.ray_direction))
         if point is None:
-            _notify(event.client, "Refused", "That click did not hit the ground: press Add obstacle again and "
-                    "click on the grid.", color="red")
+            _notify(event.client, "Refused", "That click did not hit the ground: press Add obstacle again "
+                    "and click on the grid.", color="red")
             return
         x, y = float(point[0]), float(point[1])
         self._run(event.client, lambda: self._actions.add_obstacle(x_m=x, y_m=y, radius_m=radius),
@@ -224,7 +234,8 @@ class OperatorPanel:
         self._confirm(event.client, f"Land MAV {vehicle_id}?",
                       f"MAV {vehicle_id} leaves the formation and lands where it is. It stays out of the "
                       "formation until you release it; its teammates re-space.",
-                      f"Land MAV {vehicle_id}", lambda: self._actions.land(vehicle_id), f"MAV {vehicle_id} landing")
+                      f"Land MAV {vehicle_id}", lambda: self._actions.land(vehicle_id),
+                      f"MAV {vehicle_id} landing")
 
     def _on_land_all(self, event: viser.GuiEvent) -> None:
         self._confirm(event.client, "LAND ALL?", "Every MAV leaves the formation and lands where it is.",

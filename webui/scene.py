@@ -54,8 +54,8 @@ class SceneRenderer:
         self._arena_key: tuple[float, ...] | None = None
         self._person_truth = scene.add_cylinder("/person/truth", radius=0.25, height=PERSON_HEIGHT_M,
                                                 color=PERSON_TRUTH_COLOR, visible=False)
-        self._person_estimate = scene.add_icosphere("/person/estimate", radius=0.2, color=PERSON_ESTIMATE_COLOR,
-                                                    visible=False)
+        self._person_estimate = scene.add_icosphere("/person/estimate", radius=0.2,
+                                                    color=PERSON_ESTIMATE_COLOR, visible=False)
         self._covariance = scene.add_icosphere("/person/covariance", radius=1.0, color=COVARIANCE_COLOR,
                                                opacity=0.35, visible=False, cast_shadow=False)
         self._circle = scene.add_line_segments("/formation/circle", points=np.zeros((1, 2, 3)),
@@ -81,8 +81,9 @@ class SceneRenderer:
         center = 0.5 * (view.arena_max_m + view.arena_min_m)
         self._scene.add_grid("/arena/grid", width=float(size[0]), height=float(size[1]), cell_size=1.0,
                              section_size=5.0, position=(float(center[0]), float(center[1]), 0.0))
-        self._scene.add_line_segments("/arena/bounds", points=box_segments(view.arena_min_m, view.arena_max_m),
-                                      colors=(90, 90, 90), thickness=2.0, thickness_units="screen")
+        outline = box_segments(view.arena_min_m, view.arena_max_m)
+        self._scene.add_line_segments("/arena/bounds", points=outline, colors=(90, 90, 90), thickness=2.0,
+                                      thickness_units="screen")
 
     def _draw_vehicle(self, vehicle: VehicleView, view: SceneView) -> None:
         nodes = self._vehicles.get(vehicle.vehicle_id)
@@ -92,11 +93,12 @@ class SceneRenderer:
             cam = view.camera
             nodes = {
                 "frame": self._scene.add_frame(root, show_axes=False),
-                "body": self._scene.add_box(f"{root}/body", color=color, dimensions=(0.55, 0.55, 0.14)),
+                "body": self._scene.add_box(f"{root}/body", color=color, dimensions=(0.8, 0.8, 0.2)),
                 "camera": self._scene.add_camera_frustum(
-                    f"{root}/camera", fov=cam.vertical_fov_rad, aspect=cam.aspect, scale=1.2, color=color,
+                    f"{root}/camera", fov=cam.vertical_fov_rad, aspect=cam.aspect, scale=2.0, color=color,
                     position=(cam.forward_offset_m, 0.0, 0.0), wxyz=camera_wxyz(cam.pitch_down_rad)),
-                "label": self._scene.add_label(f"{root}/label", vehicle_label(vehicle), position=(0.0, 0.0, 0.7)),
+                "label": self._scene.add_label(f"{root}/label", vehicle_label(vehicle),
+                                               position=(0.0, 0.0, 0.7)),
             }
             self._vehicles[vehicle.vehicle_id] = nodes
             self._plans[vehicle.vehicle_id] = self._scene.add_line_segments(

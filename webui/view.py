@@ -99,7 +99,8 @@ class SceneView:
         object.__setattr__(self, "arena_min_m", frozen_array(self.arena_min_m, (3,), "arena_min_m"))
         object.__setattr__(self, "arena_max_m", frozen_array(self.arena_max_m, (3,), "arena_max_m"))
         if self.person_truth_m is not None:
-            object.__setattr__(self, "person_truth_m", frozen_array(self.person_truth_m, (3,), "person_truth_m"))
+            truth = frozen_array(self.person_truth_m, (3,), "person_truth_m")
+            object.__setattr__(self, "person_truth_m", truth)
 
 
 class OperatorActions(Protocol):

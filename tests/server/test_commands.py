@@ -47,7 +47,8 @@ def test_d_des_lower_limit_spaces_neighbours_beyond_teammate_repulsion(team_size
 
 
 def test_a_smaller_arena_narrows_the_limits():
-    params = ControllerParams(mpc=MpcParams(position_min_m=(-10.0, -15.0, 2.0), position_max_m=(10.0, 15.0, 6.0)))
+    arena = MpcParams(position_min_m=(-10.0, -15.0, 2.0), position_max_m=(10.0, 15.0, 6.0))
+    params = ControllerParams(mpc=arena)
     limits = limits_from_params(params)
     assert limits.d_des_range_m(3)[1] == pytest.approx(8.5)
     assert limits.h_des_range_m() == pytest.approx((1.1, 5.1))
@@ -110,7 +111,7 @@ def test_obstacle_outside_the_arena_is_refused(x, y):
 
 
 def test_obstacle_covering_the_person_is_refused_with_the_distance_to_keep():
-    with pytest.raises(CommandError, match=r"cover the person .* at least 3.0 m from the person \(now 2.0 m\)"):
+    with pytest.raises(CommandError, match=r"cover the person .* at least 3.0 m from the person \(now 2.0"):
         obstacle(x_m=2.0, y_m=0.0, radius_m=1.5)
 
 

@@ -251,3 +251,169 @@ def test_report_puts_one_table_and_the_claims_under_each_family(tmp_path):
     for section, protocol in zip(sections, protocols, strict=True):
         assert section.count("| metric |") == 1
         assert len(rep.check_claims(rep.summarize(protocol, results))) == section.count("\n- **")
+
+
+# ---- progress bar -----------------------------------------------------------------------------------------------
+
+def test_progress_writes_one_line_per_finished_run_when_not_on_a_terminal():
+    import io
+
+    from server.experiment_command import TextProgress
+
+    specs = exp.plan_runs([exp.quick_protocol("obstacles")], base_seed=0)[:2]
+    stream = io.StringIO()
+    bar = TextProgress(total=2, stream=stream)
+    bar(1, 2, exp.RunResult(spec=specs[0], report={"metrics": {}}))
+    bar(2, 2, exp.RunResult(spec=specs[1], report=None, error="boom"))
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 2
+    assert "1/2 runs, 0 failed" in lines[0] and lines[0].endswith("run 0 ok")
+    assert "2/2 runs, 1 failed" in lines[1] and lines[1].endswith("run 1 FAILED")
+
+
+# ---- acceptance: `skyring experiment all --quick` through the real command line, twice ---------------------------
+
+QUICK_SEED = 5
+
+
+def _skyring() -> list[str]:
+    script = Path(sys.executable).with_name("skyring")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "server.cli"]
+
+
+@pytest.fixture(scope="module")
+def quick_outputs(tmp_path_factory) -> list[tuple[Path, subprocess.CompletedProcess]]:
+    """`skyring experiment all --quick` run twice with the same seed, into two directories."""
+    outputs = []
+    for name in ("first", "second"):
+        out = tmp_path_factory.mktemp(name)
+        proc = subprocess.run(
+            [*_skyring(), "experiment", "all", "--quick", "--seed", str(QUICK_SEED), "--jobs", "2", "--out",
+             str(out)], cwd=REPO, capture_output=True, text=True, timeout=900)
+        outputs.append((out, proc))
+    return outputs
+
+
+def _expected_figures() -> list[str]:
+    names = [f"{stem}.png" for _, stem, _ in figures.METHOD_PANELS]
+    return names + [f"{stem}.png" for stem, _ in figures.SWEEP_PANELS.values()]
+
+
+@pytest.mark.slow
+def test_quick_experiment_succeeds_and_shows_progress(quick_outputs):
+    out, proc = quick_outputs[0]
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    total = len(exp.plan_runs([exp.quick_protocol(f) for f in exp.FAMILIES], base_seed=QUICK_SEED))
+    assert f"{total}/{total} runs, 0 failed" in proc.stderr
+
+
+@pytest.mark.slow
+def test_quick_experiment_draws_every_figure_as_a_png_of_sensible_size(quick_outputs):
+    out, _ = quick_outputs[0]
+    for name in _expected_figures():
+        w, h = _png_size(out / figures.FIGURES_DIR / name)
+        assert 400 <= w <= 2000 and 300 <= h <= 1500, (name, w, h)
+        assert (out / figures.FIGURES_DIR / name).stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_quick_report_has_one_table_per_family_and_links_every_figure(quick_outputs):
+    out, _ = quick_outputs[0]
+    text = (out / "report.md").read_text()
+    body = rep.reproducible_part(text)
+    assert body.count("| metric |") == len(exp.FAMILIES)
+    for family in exp.FAMILIES:
+        assert f"## {rep.TITLES[family]}" in body
+    for name in _expected_figures():
+        assert f"]({figures.FIGURES_DIR}/{name})" in body
+
+
+@pytest.mark.slow
+def test_quick_experiment_keeps_every_runs_json_under_its_family(quick_outputs):
+    out, _ = quick_outputs[0]
+    specs = exp.plan_runs([exp.quick_protocol(f) for f in exp.FAMILIES], base_seed=QUICK_SEED)
+    for spec in specs:
+        doc = json.loads((out / spec.relative_path()).read_text())
+        assert doc["experiment"]["seed"] == spec.seed
+        assert doc["config"]["seed"] == spec.seed
+        assert "tracking_error_m" in doc["metrics"]
+
+
+@pytest.mark.slow
+def test_same_command_gives_the_same_report_apart_from_timings(quick_outputs):
+    (first, _), (second, _) = quick_outputs
+    a = rep.reproducible_part((first / "report.md").read_text())
+    b = rep.reproducible_part((second / "report.md").read_text())
+    assert a == b
+
+
+@pytest.mark.slow
+def test_same_command_gives_the_same_metrics_in_every_run(quick_outputs):
+    (first, _), (second, _) = quick_outputs
+    files = sorted(p.relative_to(first) for p in first.rglob("run-*.json"))
+    assert files == sorted(p.relative_to(second) for p in second.rglob("run-*.json"))
+    for rel in files:
+        a = json.loads((first / rel).read_text())["metrics"]
+        b = json.loads((second / rel).read_text())["metrics"]
+        untimed_a = {k: v for k, v in a.items() if not rep.is_timing(k)}
+        untimed_b = {k: v for k, v in b.items() if not rep.is_timing(k)}
+        assert untimed_a == untimed_b, rel
+
+
+# ---- acceptance: the paper's orderings on a fixed-seed profile --------------------------------------------------
+# The profile: SE1-SE3 with 5 MAVs; 3 and 16 MAVs with the paper's trees; 0 % and 25 % link loss with 8 MAVs; every
+# condition ORDERING_RUNS runs of ORDERING_DURATION_S (the first 20 s are the simulator's warm-up) at the MPC's
+# own 10 Hz, base seed ORDERING_SEED.
+
+ORDERING_RUNS = 3
+ORDERING_DURATION_S = 60.0
+ORDERING_RATE_HZ = 10.0
+ORDERING_SEED = 2019
+
+
+def _ordering_protocols() -> list[exp.Protocol]:
+    def keep(family, wanted):
+        p = exp.paper_protocol(family)
+        p = exp.Protocol(family, tuple(c for c in p.conditions if c.x in wanted), p.durations_s, p.rate_hz)
+        return exp.with_overrides(p, exp.ProfileOverrides(runs=ORDERING_RUNS, duration_s=ORDERING_DURATION_S,
+                                                          rate_hz=ORDERING_RATE_HZ))
+
+    return [keep("methods", (1.0, 2.0, 3.0)), keep("scalability", (3.0, 16.0)), keep("commloss", (0.0, 25.0))]
+
+
+@pytest.fixture(scope="module")
+def ordering(tmp_path_factory) -> dict[str, rep.FamilySummary]:
+    protocols = _ordering_protocols()
+    specs = exp.plan_runs(protocols, base_seed=ORDERING_SEED)
+    results = exp.run_all(specs, jobs=2, out_dir=tmp_path_factory.mktemp("ordering"))
+    assert all(r.ok for r in results), [r.error for r in results if not r.ok]
+    return {p.family: rep.summarize(p, results) for p in protocols}
+
+
+def _mean(summary: rep.FamilySummary, metric: str, **settings) -> float:
+    return summary.find(**settings).mean(metric)
+
+
+@pytest.mark.slow
+def test_active_has_lower_mean_uncertainty_than_dqmpc_and_price(ordering):
+    s = ordering["methods"]
+    active = _mean(s, rep.UNCERTAINTY, method="active")
+    assert active < _mean(s, rep.UNCERTAINTY, method="dqmpc")
+    assert active < _mean(s, rep.UNCERTAINTY, method="price")
+
+
+@pytest.mark.slow
+def test_active_keeps_the_person_in_frame_at_least_90_percent_without_obstacles(ordering):
+    assert _mean(ordering["methods"], rep.IN_FRAME, method="active", trees="none") >= 0.9
+
+
+@pytest.mark.slow
+def test_sixteen_mavs_track_the_person_more_accurately_than_three(ordering):
+    s = ordering["scalability"]
+    assert _mean(s, rep.ERROR, vehicles=16) < _mean(s, rep.ERROR, vehicles=3)
+
+
+@pytest.mark.slow
+def test_error_at_25_percent_link_loss_is_within_20_percent_of_the_lossless_error(ordering):
+    s = ordering["commloss"]
+    assert _mean(s, rep.ERROR, comm_loss=0.25) <= 1.2 * _mean(s, rep.ERROR, comm_loss=0.0)

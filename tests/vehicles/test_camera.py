@@ -67,8 +67,8 @@ def test_rolling_right_side_down_moves_the_person_right_in_the_image():
     rolled, _ = project(PERSON[None, :], _looking_at_person(roll_rad=math.radians(10.0)))
     # The optical axis points below the horizon, so rolling right side down swings it to the left (the body's
     # underside moves left): the scene moves right in the image, by about fx tan(10 deg) sin(45 deg) px.
-    assert rolled[0, 0] - level[0, 0] == pytest.approx(1470.33 * math.tan(math.radians(10.0)) * math.sqrt(0.5),
-                                                       rel=0.1)
+    expected_px = 1470.33 * math.tan(math.radians(10.0)) * math.sqrt(0.5)
+    assert rolled[0, 0] - level[0, 0] == pytest.approx(expected_px, rel=0.1)
 
 
 def test_points_behind_the_camera_are_never_inside_the_image():
@@ -82,7 +82,8 @@ def test_forward_acceleration_pitches_nose_down_and_leftward_rolls_left_side_dow
     roll, pitch = attitude_from_acceleration(acceleration_mps2=np.array([3.0, 0.0, 0.0]), yaw_rad=0.0)
     assert pitch == pytest.approx(-math.atan2(3.0, 9.81), abs=1e-12)
     assert roll == pytest.approx(0.0, abs=1e-12)
-    roll, pitch = attitude_from_acceleration(acceleration_mps2=np.array([-3.0, 0.0, 0.0]), yaw_rad=math.pi / 2)
+    roll, pitch = attitude_from_acceleration(acceleration_mps2=np.array([-3.0, 0.0, 0.0]),
+                                             yaw_rad=math.pi / 2)
     assert roll == pytest.approx(-math.atan2(3.0, 9.81), abs=1e-12)  # -x is the body's left at yaw 90 deg
     assert pitch == pytest.approx(0.0, abs=1e-12)
 
@@ -100,7 +101,8 @@ def test_a_trunk_between_camera_and_person_blocks_the_line_of_sight():
 
 def test_a_blocked_person_is_in_frame_but_not_visible():
     trunk = Obstacle(obstacle_id="t", center_m=(4.0, 0.0), radius_m=0.3, height_m=12.0)
-    view = view_person(pose=_looking_at_person(), center_m=PERSON, feet_m=FEET, head_m=HEAD, obstacles=(trunk,))
+    view = view_person(pose=_looking_at_person(), center_m=PERSON, feet_m=FEET, head_m=HEAD,
+                       obstacles=(trunk,))
     assert view.in_frame and not view.visible
     # the principal point (1020.5, 543.5) is half a pixel off the image centre (1020, 543)
     assert view.center_offset_px == pytest.approx(math.sqrt(0.5), abs=1e-6)

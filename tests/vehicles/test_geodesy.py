@@ -92,7 +92,8 @@ def test_local_frame_agrees_with_pymap3d_ned_to_geodetic_to_enu():
     frame = LocalFrame.from_origin(local_origin=origin, reference=ZURICH)
     rng = np.random.default_rng(4)
     for ned in rng.uniform(-200, 200, size=(20, 3)):
-        lat, lon, alt = pymap3d.ned2geodetic(*ned, origin.latitude_deg, origin.longitude_deg, origin.altitude_m)
+        lat, lon, alt = pymap3d.ned2geodetic(*ned, origin.latitude_deg, origin.longitude_deg,
+                                             origin.altitude_m)
         truth = geodetic_to_enu(GeodeticPoint(lat, lon, alt), reference=ZURICH)
         np.testing.assert_allclose(frame.to_enu(ned), truth, atol=1e-4)
 

@@ -1,0 +1,105 @@
+"""`skyring serve`: the ground station over the embedded simulation (default) in real time.
+
+Prints the operator URL (viser) and the API URL as soon as both listen. The station is built by
+`build_station`; other back-ends (PX4 through MAVSDK) build their autopilots and hand the same ground station
+a mission over them, then call `run`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from typing import Annotated
+
+import typer
+
+from controller.params import Method
+
+log = logging.getLogger(__name__)
+
+
+def build_station(*, vehicles: int, seed: int, method: Method, trees: str, person: str, rate_hz: float):
+    """A ground station over the embedded simulation: `vehicles` simulated MAVs, the paper's (or no, or N
+    random) trees and the walking (random, still) person, ticking at rate_hz."""
+    from server.ground_station import GroundStation
+    from vehicles.scenario import Scenario, build_sim
+
+    setup = build_sim(Scenario(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person),
+                      clock=time.perf_counter)
+    return GroundStation(mission=setup.mission, control_period_s=1.0 / rate_hz)
+
+
+def run(station, *, host: str, port: int, viser_port: int, speed: float) -> None:
+    """Serve `station` until Ctrl-C / SIGTERM; the MAVs are told to land on the way out."""
+    from server.live import Urls, serve_station
+
+    def ready(urls: Urls, _ui: object) -> None:
+        if urls.api_fell_back:
+            typer.echo(f"port {port} is busy: the API uses {urls.api} instead")
+        if urls.viser_fell_back:
+            typer.echo(f"port {viser_port} is busy: the operator page uses {urls.operator} instead")
+        typer.echo(f"operator view:  {urls.operator}")
+        typer.echo(f"API and docs:   {urls.api}  ({urls.api}docs, state at {urls.api}api/state, stream at "
+                   f"{urls.api.replace('http', 'ws', 1)}ws)")
+        typer.echo("Ctrl-C to stop (every MAV is told to land).")
+
+    stats = asyncio.run(serve_station(station, host=host, port=port, viser_port=viser_port, speed=speed,
+                                      on_ready=ready))
+    typer.echo(f"stopped after {stats.ticks} control ticks ({stats.achieved_speed:.2f}x real time"
+               + (f", fell behind {stats.lagged} times" if stats.lagged else "") + ")")
+
+
+def serve(
+    host: Annotated[str, typer.Option(help="address to listen on (0.0.0.0: every interface)")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="API port; a free one is used if it is busy")] = 8000,
+    viser_port: Annotated[int, typer.Option(help="operator page (viser) port; the next free one if "
+                                                 "busy")] = 8080,
+    vehicles: Annotated[int, typer.Option(help="number of simulated MAVs")] = 3,
+    seed: Annotated[int, typer.Option(help="seed of the simulated world")] = 0,
+    speed: Annotated[float, typer.Option(help="simulated seconds per wall second")] = 1.0,
+    method: Annotated[Method, typer.Option(help="formation method")] = Method.ACTIVE,
+    trees: Annotated[str, typer.Option(help="paper, none, or a number of random trees")] = "paper",
+    person: Annotated[str, typer.Option(help="paper (scripted walk), random or still")] = "paper",
+    rate: Annotated[float, typer.Option(help="control rate in Hz (the paper: 100)")] = 100.0,
+    px4: Annotated[list[str] | None, typer.Option(
+        help="fly PX4 vehicles: a MAVSDK URL per vehicle (repeat, or comma-separate), e.g. "
+             "udpin://0.0.0.0:14540")] = None,
+    px4_sitl: Annotated[int, typer.Option(
+        help="fly N local PX4 SITL instances (udpin://0.0.0.0:14540+i)")] = 0,
+    origin: Annotated[str | None, typer.Option(
+        help="team frame origin 'lat,lon,alt' for PX4 vehicles (default: vehicle 1's home)")] = None,
+) -> None:
+    """Run the ground station over the embedded simulation: 3-D operator view, REST API and state stream."""
+    if not 1 <= vehicles <= 16:
+        raise typer.BadParameter(f"must be from 1 to 16, got {vehicles}", param_hint="--vehicles")
+    if not (math.isfinite(speed) and 0.0 < speed <= 100.0):
+        raise typer.BadParameter(f"must be in (0, 100], got {speed}", param_hint="--speed")
+    if not (math.isfinite(rate) and 1.0 <= rate <= 1000.0):
+        raise typer.BadParameter(f"must be from 1 to 1000 Hz, got {rate}", param_hint="--rate")
+    if seed < 0:
+        raise typer.BadParameter(f"must be >= 0, got {seed}", param_hint="--seed")
+    for name, value in (("--port", port), ("--viser-port", viser_port)):
+        if not 0 <= value <= 65535:
+            raise typer.BadParameter(f"must be a TCP port (0-65535), got {value}", param_hint=name)
+    if px4 or px4_sitl:
+        from server.px4_station import run_px4  # MAVSDK loads only when PX4 vehicles are asked for
+
+        run_px4(px4=px4 or [], sitl=px4_sitl, origin=origin, seed=seed, method=method, person=person,
+                trees=trees, rate_hz=rate, host=host, port=port, viser_port=viser_port, speed=speed)
+        return
+    from vehicles.scenario import PERSON_MODES
+    from vehicles.trees import TreeSpec
+
+    try:
+        TreeSpec.parse(trees)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--trees") from None
+    if person not in PERSON_MODES:
+        raise typer.BadParameter(f"must be one of {', '.join(PERSON_MODES)}, got {person!r}",
+                                 param_hint="--person")
+    station = build_station(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person,
+                            rate_hz=rate)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    run(station, host=host, port=port, viser_port=viser_port, speed=speed)

@@ -1,0 +1,140 @@
+"""One MAV's loop: tracker fusion, message handling, roles, plan publishing, roster slot, robustness."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controller.messages import Detection, HorizonPlan
+from controller.params import ControllerParams
+from vehicles.agent import Agent, AgentInputs, AgentRole, hold_plan
+from vehicles.autopilot import AutopilotState, FlightMode
+
+PERSON = np.array([0.0, 0.0, 0.9])
+
+
+def _state(vid=1, t=0.0, pos=(8.0, 0.0, 8.9)):
+    return AutopilotState(vehicle_id=vid, stamp_s=t, position_m=pos, velocity_mps=(0, 0, 0), yaw_rad=math.pi,
+                          armed=True, in_air=True, mode=FlightMode.OFFBOARD)
+
+
+def _det(source, t, pos=PERSON):
+    return Detection(source_id=source, stamp_s=t, position_m=pos, cov_m2=np.eye(3) * 0.5)
+
+
+def _plan(vid, t, pos, in_formation=True):
+    n = ControllerParams().mpc.horizon_steps + 2
+    return HorizonPlan(vehicle_id=vid, stamp_s=t, dt_s=0.1, positions_m=np.tile(pos, (n, 1)),
+                       velocities_mps=np.zeros((n, 3)), in_formation=in_formation)
+
+
+def _inputs(t, **kw):
+    kw.setdefault("own", _state(t=t))
+    return AgentInputs(**kw)
+
+
+def test_own_detections_are_fused_and_broadcast():
+    agent = Agent(vehicle_id=1)
+    dets = (_det(1, 0.0),)
+    out = agent.tick(0.0, _inputs(0.0, detections=dets, role=AgentRole.GROUND))
+    assert out.person is not None
+    np.testing.assert_allclose(out.person.position_m, PERSON, atol=1e-9)
+    assert out.counters.own_detections_fused == 1
+    assert out.outbox == dets
+
+
+def test_teammate_detections_are_fused_and_not_rebroadcast():
+    agent = Agent(vehicle_id=1)
+    out = agent.tick(0.1, _inputs(0.1, received=(_det(2, 0.05),), role=AgentRole.GROUND))
+    assert out.counters.teammate_detections_fused == 1
+    assert out.person is not None
+    assert out.outbox == ()
+
+
+def test_echoes_of_its_own_messages_and_unknown_messages_are_rejected_and_counted():
+    agent = Agent(vehicle_id=1)
+    bad_plan = _plan(2, 0.0, [np.nan, 0.0, 8.9])
+    received = (_det(1, 0.0), _plan(1, 0.0, [8.0, 0, 8.9]), "garbage", bad_plan)
+    out = agent.tick(0.1, _inputs(0.1, received=received, detections=(_det(3, 0.0),), role=AgentRole.GROUND))
+    assert out.counters.rejected_messages == 5
+    assert out.person is None
+    assert agent.teammate_plans(0.1) == ()
+
+
+def test_formation_role_sends_a_finite_setpoint_and_publishes_an_in_formation_plan():
+    agent = Agent(vehicle_id=1)
+    out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), role=AgentRole.FORMATION))
+    assert out.setpoint is not None and out.control is not None
+    assert np.all(np.isfinite(out.setpoint.position_m)) and np.isfinite(out.setpoint.yaw_rad)
+    plans = [m for m in out.outbox if isinstance(m, HorizonPlan)]
+    assert len(plans) == 1 and plans[0].in_formation and plans[0].vehicle_id == 1
+
+
+def test_ground_role_sends_no_setpoint_and_no_plan_but_keeps_tracking():
+    agent = Agent(vehicle_id=1)
+    out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), role=AgentRole.GROUND))
+    assert out.setpoint is None and out.plan is None
+    assert not any(isinstance(m, HorizonPlan) for m in out.outbox)
+    assert out.person is not None
+
+
+def test_airborne_role_publishes_a_hold_plan_out_of_formation():
+    agent = Agent(vehicle_id=1)
+    out = agent.tick(0.0, _inputs(0.0, role=AgentRole.AIRBORNE))
+    assert out.setpoint is None
+    assert out.plan is not None and not out.plan.in_formation
+    np.testing.assert_allclose(out.plan.positions_m, np.tile([8.0, 0.0, 8.9], (17, 1)))
+
+
+def test_plans_go_out_at_10_hz_when_ticked_at_100_hz():
+    agent = Agent(vehicle_id=1)
+    sent = 0
+    for i in range(100):
+        t = i * 0.01
+        out = agent.tick(t, _inputs(t, role=AgentRole.AIRBORNE))
+        sent += sum(isinstance(m, HorizonPlan) for m in out.outbox)
+    assert sent == 10
+
+
+def test_teammate_plans_are_kept_until_the_timeout():
+    agent = Agent(vehicle_id=1)
+    agent.tick(0.0, _inputs(0.0, received=(_plan(2, 0.0, [-8.0, 0.0, 8.9]),), role=AgentRole.GROUND))
+    assert [p.vehicle_id for p in agent.teammate_plans(2.9)] == [2]
+    assert agent.teammate_plans(3.1) == ()
+
+
+def test_a_newer_plan_replaces_an_older_one_but_not_the_reverse():
+    agent = Agent(vehicle_id=1)
+    new, old = _plan(2, 1.0, [-8.0, 0.0, 8.9]), _plan(2, 0.5, [-7.0, 0.0, 8.9])
+    agent.tick(1.1, _inputs(1.1, received=(new, old), role=AgentRole.GROUND))
+    assert agent.teammate_plans(1.1)[0].stamp_s == 1.0
+
+
+def test_the_roster_slot_is_used_only_while_teammates_are_unheard():
+    agent = Agent(vehicle_id=1)
+    alone = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), slot_bearing_rad=0.0, slot_count=3))
+    assert alone.used_slot and alone.teammates_known == 0
+    mates = (_plan(2, 0.05, [-4.0, 6.9, 8.9]), _plan(3, 0.05, [-4.0, -6.9, 8.9]))
+    heard = agent.tick(0.1, _inputs(0.1, received=mates, slot_bearing_rad=0.0, slot_count=3))
+    assert not heard.used_slot and heard.teammates_known == 2
+    assert heard.counters.slot_ticks == 1
+
+
+def test_a_controller_exception_is_caught_counted_and_the_mav_holds_where_it_is():
+    class Broken:
+        def step(self, **kwargs):
+            raise RuntimeError("boom")
+
+    agent = Agent(vehicle_id=1)
+    agent._controller = Broken()
+    out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),)))
+    assert out.counters.controller_errors == 1
+    assert "boom" in out.fault
+    np.testing.assert_allclose(out.setpoint.position_m, [8.0, 0.0, 8.9])
+    np.testing.assert_allclose(out.setpoint.velocity_mps, 0.0)
+
+
+def test_hold_plan_stays_at_the_reported_position():
+    plan = hold_plan(state=_state(pos=(1.0, 2.0, 5.0)), params=ControllerParams())
+    assert plan.positions_m.shape == (17, 3)
+    assert plan.position_at(0.7) == pytest.approx(np.array([1.0, 2.0, 5.0]))

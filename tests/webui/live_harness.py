@@ -1,0 +1,154 @@
+"""Harness for the browser tests: a live ground station served exactly as `skyring serve` serves it (the same
+`serve_station` path, in a background thread, faster than real time), and helpers to drive its page."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from playwright.sync_api import Browser, FrameLocator, Locator, Page
+from viser import transforms as tf
+
+from server.ground_station import GroundStation
+from server.live import Urls, serve_station
+from vehicles.mission import Phase
+from vehicles.scenario import Scenario, build_sim
+
+RATE_HZ = 20.0  # control rate of the live station in these tests (20 Hz; the MPC's own step is 0.1 s)
+SPEED = 4.0  # simulated seconds per wall second
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic"]
+
+
+@dataclass
+class Live:
+    """A running ground station: its station, URLs and viser UI, and the thread that serves them."""
+
+    station: GroundStation
+    urls: Urls
+    ui: object
+    stop: Callable[[], None]
+    pages: list[Page] = field(default_factory=list)
+
+    def wait_for(self, condition: Callable[[], bool], *, sim_s: float, what: str) -> float:
+        """Wait until condition() holds; fail if sim_s of simulated time pass first (or, should the simulation
+        stall, five times the wall time that should take). Returns the simulated seconds it took."""
+        start, wall_start = self.station.time_s, time.monotonic()
+        while not condition():
+            assert self.station.time_s - start < sim_s, f"{what}: not within {sim_s} s of simulated time"
+            stalled = time.monotonic() - wall_start > 5.0 * sim_s / SPEED + 10.0
+            assert not stalled, f"{what}: the simulation stalled"
+            time.sleep(0.05)
+        return self.station.time_s - start
+
+    def mean_horizontal_distance_m(self) -> float:
+        with self.station.lock:
+            snap = self.station.snapshot()
+            person = snap.person_truth.position_m[:2]
+            return float(np.mean([np.hypot(*(v.autopilot.position_m[:2] - person)) for v in snap.vehicles]))
+
+    def phases(self) -> set[Phase]:
+        return {v.phase for v in self.station.snapshot().vehicles}
+
+
+def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thread]:
+    setup = build_sim(Scenario(vehicles=vehicles, seed=seed), clock=time.perf_counter)
+    station = GroundStation(mission=setup.mission, control_period_s=1.0 / RATE_HZ)
+    ready = threading.Event()
+    box: dict[str, object] = {}
+    loop = asyncio.new_event_loop()
+    stop_event = asyncio.Event()
+
+    def on_ready(urls: Urls, ui: object) -> None:
+        box.update(urls=urls, ui=ui)
+        ready.set()
+
+    def serve() -> None:
+        asyncio.set_event_loop(loop)
+        try:
+            box["stats"] = loop.run_until_complete(serve_station(
+                station, host="127.0.0.1", port=0, viser_port=0, speed=SPEED, stop=stop_event,
+                on_ready=on_ready, handle_signals=False))
+        except BaseException as exc:  # noqa: BLE001 - reported to the test thread below
+            box["error"] = exc
+            ready.set()
+        finally:
+            loop.close()
+
+    thread = threading.Thread(target=serve, name="ground-station", daemon=True)
+    thread.start()
+    assert ready.wait(30.0), "the ground station did not start within 30 s"
+    if "error" in box:
+        raise box["error"]
+    live = Live(station=station, urls=box["urls"], ui=box["ui"],
+                stop=lambda: loop.call_soon_threadsafe(stop_event.set))
+    return live, thread
+
+
+@dataclass
+class OpenPage:
+    """A browser page on the landing page, with everything it logged and requested."""
+
+    page: Page
+    console_errors: list[str]
+    requests: list[str]
+
+    @property
+    def operator(self) -> FrameLocator:
+        """The embedded viser page."""
+        return self.page.frame_locator("#operator-view")
+
+
+def open_page(browser: Browser, url: str) -> OpenPage:
+    """Open `url` in a new context, recording console errors, page errors and every request URL; wait for the
+    operator page's canvas and controls."""
+    context = browser.new_context(viewport={"width": 1100, "height": 700})
+    page = context.new_page()
+    opened = OpenPage(page=page, console_errors=[], requests=[])
+    page.on("console", lambda m: opened.console_errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: opened.console_errors.append(str(e)))
+    page.on("request", lambda r: opened.requests.append(r.url))
+    page.on("websocket", lambda ws: opened.requests.append(ws.url))
+    page.goto(url)
+    frame = page.frame_locator("#operator-view")
+    frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
+    frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=30_000)
+    return opened
+
+
+def close_page(opened: OpenPage) -> None:
+    opened.page.context.close()
+
+
+def scene_canvas(frame: FrameLocator) -> Locator:
+    """The 3-D canvas of the operator page (three.js renders it; the GUI's plots are canvases too)."""
+    return frame.locator('canvas[data-engine^="three.js"]')
+
+
+def number_input(frame: FrameLocator, label: str) -> Locator:
+    """The number box of the viser slider or number input labelled `label`."""
+    return frame.get_by_text(label, exact=True).locator(
+        "xpath=ancestor::div[contains(@class,'mantine-Flex-root')][1]//input[contains(@class,'NumberInput-input')]")
+
+
+def newest_client(ui) -> object:
+    """The viser client that connected last (the page a test just opened)."""
+    clients = ui.server.get_clients()
+    return clients[max(clients)]
+
+
+def ground_to_canvas_fraction(camera, point_m: np.ndarray) -> tuple[float, float]:
+    """Where the world point appears in a client's canvas, as fractions of its width and height (OpenCV
+    pinhole: viser's camera looks along +z with +y down; fov is vertical)."""
+    r = tf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    p = r.T @ (np.asarray(point_m, dtype=float) - np.asarray(camera.position))
+    assert p[2] > 0, "the point is behind the camera"
+    t = math.tan(camera.fov / 2.0)
+    return 0.5 + p[0] / p[2] / (2.0 * t * camera.aspect), 0.5 + p[1] / p[2] / (2.0 * t)
