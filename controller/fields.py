@@ -88,6 +88,7 @@ class FieldParams:
     dqmpc_d_min_m: float = 1.0
     dqmpc_d_max_m: float = 4.0
     anticipate: bool = False
+    tracking_pair_clamp: bool = False
     teammate_peak_mps2: float = 8.0
     obstacle_peak_mps2: float = 8.0
     person_peak_mps2: float = 8.0
@@ -319,7 +320,10 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
                                  gain=params.gain, freeze_fraction=params.freeze_fraction)
     side = np.sign(signed)
     side = np.where(side == 0.0, np.where(own_id < mate_ids, -1.0, 1.0)[:, None], side)
-    scalar = (np.abs(d_des_m - rho) + params.tracking_c) * (mag * side).sum(axis=0)
+    pair = (np.abs(d_des_m - rho) + params.tracking_c)[None, :] * mag
+    if params.tracking_pair_clamp:
+        pair = np.minimum(pair, params.tracking_max_mps2)
+    scalar = (pair * side).sum(axis=0)
     return scalar[:, None] * _tangents(rel_xy, rho)
 
 

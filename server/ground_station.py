@@ -281,6 +281,7 @@ def scene_view(snap: MissionSnapshot, *, limits: CommandLimits, link_stale_s: fl
         vehicles=tuple(vehicle_view(v, link_stale_s=link_stale_s) for v in snap.vehicles),
         obstacles=snap.obstacles, formation=snap.formation, formation_enabled=snap.formation_enabled,
         arena_min_m=np.array(limits.arena_min_m), arena_max_m=np.array(limits.arena_max_m),
-        d_des_range_m=Range(*d_range), h_des_range_m=Range(*h_range), person_truth_m=truth,
+        d_des_range_m=Range(*d_range), h_des_range_m=Range(*h_range),
+        obstacle_radius_range_m=Range(0.1, limits.max_obstacle_radius_m), person_truth_m=truth,
         person_estimate=best[2] if best else None, estimate_source_id=best[1] if best else None,
         tracking_error_m=error, camera=camera or CameraView())

@@ -185,8 +185,9 @@ class Px4Status:
     """The back-end's own view of one vehicle, for the ground station and logs.
 
     engagement: vehicles/px4_supervisor.Engagement value; setpoint_age_s: age of the agent's last set-point;
-    counters: set-points ignored (not engaged) or rejected (malformed), watchdog holds/landings, commands PX4
-    refused or that timed out, telemetry readings dropped as malformed; frame_source: "origin" (the estimator
+    counters: set-points ignored (not engaged) or rejected (malformed), land/hold requests not sent because a
+    pilot flies the vehicle, watchdog holds/landings, commands PX4 refused or that timed out, telemetry
+    readings dropped as malformed; frame_source: "origin" (the estimator
     origin) or "fix" (inferred from one position reading); fault: the last problem, in words.
     """
 
@@ -197,6 +198,7 @@ class Px4Status:
     link_lost: bool
     setpoint_age_s: float
     ignored_setpoints: int
+    ignored_requests: int
     rejected_setpoints: int
     watchdog_holds: int
     watchdog_landings: int
@@ -437,6 +439,7 @@ class Px4Autopilot:
                          released_reason=s.released_reason,
                          link_lost=now - last > self.config.link_lost_after_s,
                          setpoint_age_s=s.setpoint_age_s(now), ignored_setpoints=s.ignored_setpoints,
+                         ignored_requests=s.ignored_requests,
                          rejected_setpoints=self._rejected_setpoints, watchdog_holds=s.watchdog_holds,
                          watchdog_landings=s.watchdog_landings, failed_commands=self._failed_commands,
                          malformed_telemetry=malformed, frame_source=self._frame_source, fault=self._fault)

@@ -3,7 +3,8 @@
 MAVSDK re-sends the last offboard set-point at 20 Hz, which would hide a stalled controller from PX4's own
 offboard-loss failsafe; so skyring watches the age of the agent's output itself: older than `hold_after_s`
 -> Hold, older than `land_after_s` -> Land. A vehicle taken out of offboard by a pilot (RC mode switch) or by
-PX4 (a failsafe) is *released*: skyring stops streaming and does not switch back until re-engaged (takeoff).
+PX4 (a failsafe) is *released*: skyring stops streaming and does not switch back until re-engaged (takeoff);
+while a pilot flies it (a manual mode) skyring's land and hold requests are not sent either.
 
 Pure and clock-free: the asyncio back-end (vehicles/px4.py) reports set-points and telemetry observations,
 and executes the one `Command` that `step` returns. Engagement:
@@ -93,6 +94,7 @@ class OffboardSupervisor:
         self.released_reason: str | None = None
         self.takeoff_height_m: float | None = None
         self.ignored_setpoints = 0
+        self.ignored_requests = 0
         self.watchdog_holds = 0
         self.watchdog_landings = 0
         self._last_setpoint_s: float | None = None
@@ -187,6 +189,9 @@ class OffboardSupervisor:
         command = None
         requests, self._requests = self._requests, []
         for kind, value in requests:
+            if kind in ("land", "hold") and self.released and obs.mode is FlightMode.MANUAL:
+                self.ignored_requests += 1  # a pilot flies it: landing or holding is the pilot's call
+                continue
             if kind == "land":
                 if self.engagement is Engagement.LANDING:
                     continue  # already landing: the retry logic handles a lost command

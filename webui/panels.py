@@ -46,7 +46,7 @@ def status_line(view: SceneView) -> str:
     flying = sum(v.in_formation for v in view.vehicles)
     state = "running" if view.formation_enabled else "stopped (holding)"
     return (f"t = {view.time_s:.1f} s · formation {state} · "
-            f"{flying}/{len(view.vehicles)} MAVs in formation  \n"
+            f"{flying}/{len(view.vehicles)} MAVs flying formation  \n"
             f"d_des {view.formation.d_des_m:.1f} m · h_des {view.formation.h_des_m:.1f} m")
 
 
@@ -89,7 +89,9 @@ class OperatorPanel:
         self._cards: dict[int, dict[str, Any]] = {}
         self._obstacle_folder = gui.add_folder("Virtual obstacles")
         with self._obstacle_folder:
-            self._radius = gui.add_number("radius (m)", initial_value=1.0, min=0.1, max=10.0, step=0.1)
+            radii = initial.obstacle_radius_range_m
+            self._radius = gui.add_number("radius (m)", initial_value=min(max(1.0, radii.low), radii.high),
+                                          min=radii.low, max=radii.high, step=0.1)
             add = gui.add_button("Add obstacle, then click the ground", icon=viser.Icon.CIRCLE_PLUS)
             add.on_click(self._on_add_obstacle)
             self._obstacle_list = gui.add_markdown("none")

@@ -76,8 +76,8 @@ class SceneView:
     the fused estimate drawn with its covariance ellipsoid (None before the first detection);
     estimate_source_id: the MAV whose tracker replica it comes from; tracking_error_m: mean over MAVs of
     |estimate - truth| (simulation only, else None); arena_min_m / arena_max_m (3,): the box the MAVs fly
-    in; d_des_range_m / h_des_range_m: what the operator may set (the same limits the ground station
-    enforces).
+    in; d_des_range_m / h_des_range_m / obstacle_radius_range_m: what the operator may set (the same limits
+    the ground station enforces).
     """
 
     time_s: float
@@ -89,6 +89,7 @@ class SceneView:
     arena_max_m: np.ndarray
     d_des_range_m: Range
     h_des_range_m: Range
+    obstacle_radius_range_m: Range = Range(0.1, 5.0)
     person_truth_m: np.ndarray | None = None
     person_estimate: PersonEstimate | None = None
     estimate_source_id: int | None = None

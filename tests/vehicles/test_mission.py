@@ -63,9 +63,8 @@ def test_stopping_the_formation_makes_flying_vehicles_hold_within_one_period():
     t = _in_formation(setup)
     setup.mission.set_formation_enabled(False)
     _run(setup, t, 0.1)
-    snap = setup.mission.snapshot()
-    assert {v.autopilot.mode for v in snap.vehicles} == {FlightMode.HOLD}
-    assert not snap.formation_enabled
+    assert {a.state().mode for a in setup.autopilots} == {FlightMode.HOLD}
+    assert not setup.mission.snapshot().formation_enabled
 
 
 def test_land_takes_effect_within_one_control_period_and_ends_landed():

@@ -200,3 +200,18 @@ def test_setpoints_held_back_during_takeoff_do_not_count_as_prestreaming():
     run(sup, 0.05, 1.0, FlightMode.TAKEOFF)  # the agent starts early; nothing is forwarded while climbing
     cmds = run(sup, 1.0, 3.0, FlightMode.HOLD)  # engaged at 1.0 (after the mode grace): pre-stream from there
     assert cmds == [(2.0, Command.START_OFFBOARD)]
+
+
+def test_land_request_is_not_sent_while_a_pilot_flies_the_released_vehicle():
+    sup, t = following()
+    run(sup, t, t + 2.0, FlightMode.MANUAL)
+    sup.request_land()  # e.g. the mission re-sending its landing
+    assert sup.step(obs(t + 2.0, FlightMode.MANUAL)) is None
+    assert sup.ignored_requests == 1 and sup.released
+
+
+def test_land_request_lands_a_vehicle_released_to_a_px4_failsafe():
+    sup, t = following()
+    run(sup, t, t + 2.0, FlightMode.RETURN)
+    sup.request_land()
+    assert sup.step(obs(t + 2.0, FlightMode.RETURN)) is Command.LAND
