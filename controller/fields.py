@@ -89,6 +89,8 @@ class FieldParams:
     dqmpc_d_max_m: float = 4.0
     anticipate: bool = False
     tracking_pair_clamp: bool = False
+    obstacle_slide: float = 1.0
+    slide_max_mps2: float = 2.0
     teammate_peak_mps2: float = 8.0
     obstacle_peak_mps2: float = 8.0
     person_peak_mps2: float = 8.0
@@ -354,6 +356,37 @@ def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, pea
     return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)
 
 
+def obstacle_inputs(*, diff_xy: np.ndarray, surface: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray,
+                    person_xy: np.ndarray, obstacles: ObstacleSet, d_min: float, d_max: float,
+                    person_d_min_m: float, active: np.ndarray, params: FieldParams) -> np.ndarray:
+    """Static and virtual obstacle input (eq. 15) plus a radial slide, (N+1, 2).
+
+    diff_xy (M, N+1, 2) from each axis to us; surface (M, N+1) distance to each cylinder's surface. The repulsion
+    F(surface) points away from the axis. An obstacle on the circle about the person blocks a MAV sliding along
+    the circle with a purely tangential push, a local minimum the approach-angle input does not resolve; so the
+    tangential part of each repulsion also pushes the MAV radially around the obstacle, by obstacle_slide times
+    |tangential part|: outwards (away from the person), or inwards when the MAV is inside the obstacle's radius
+    and the passage between the obstacle and the person's safety radius is wide enough.
+    """
+    gain = peak_gain(params.obstacle_peak_mps2, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
+    mag = cotangential_magnitude(surface, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction)
+    mag = np.where(active, mag, 0.0)
+    axis_dist = surface + obstacles.radii_m[:, None]
+    unit = _away(diff_xy, axis_dist, 1.0)
+    force = (mag[..., None] * unit).sum(axis=0)
+    if params.obstacle_slide > 0.0 and np.any(mag > 0.0):
+        radial = rel_xy / np.where(rho > 1e-9, rho, np.inf)[:, None]
+        tangent = _tangents(rel_xy, rho)
+        blocked = np.abs(np.einsum("mni,ni->mn", unit, tangent))
+        rho_m = np.linalg.norm(obstacles.centers_m[:, None, :] - person_xy[None], axis=-1)
+        inner_gap = rho_m - obstacles.radii_m[:, None] - d_min - person_d_min_m
+        side = np.where((rho[None, :] < rho_m) & (inner_gap > 0.0), -1.0, 1.0)
+        slide = np.clip((params.obstacle_slide * mag * blocked * side).sum(axis=0), -params.slide_max_mps2,
+                        params.slide_max_mps2)
+        force = force + slide[:, None] * radial
+    return force
+
+
 def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, person_xy: np.ndarray,
                     obstacles: ObstacleSet, active: np.ndarray, params: FieldParams) -> np.ndarray:
     """Approach-angle input against local minima behind obstacles, (N+1, 2), before its clamp.
@@ -375,7 +408,9 @@ def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, 
                - obstacles.radii_m[:, None])
     ramp = np.clip(1.0 - surface / params.approach_range_m, 0.0, 1.0)
     side = np.where(signed >= 0.0, 1.0, -1.0)
-    scalar = np.where(active, mag * ramp * side, 0.0).sum(axis=0)
+    rho_m = np.linalg.norm(obs_rel, axis=-1)
+    in_line = rho_m + obstacles.radii_m[:, None] + params.obstacle_d_min_m < rho[None, :]
+    scalar = np.where(active & in_line, mag * ramp * side, 0.0).sum(axis=0)
     return scalar[:, None] * _tangents(rel_xy, rho)
 
 
@@ -434,9 +469,10 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
         # A cylinder counts only where the MAV is not clearly above its top.
         below_top = own[None, :, 2] < obstacles.heights_m[:, None] + d_min
         if terms.obstacles:
-            obstacle = repulsion_inputs(diff_xy=diff, dist=surface, d_min=d_min, d_max=d_max, params=params,
-                                        peak=params.obstacle_peak_mps2,
-                                        active=below_top)
+            obstacle = obstacle_inputs(diff_xy=diff, surface=surface, rel_xy=rel, rho=rho, person_xy=person_xy,
+                                       obstacles=obstacles, d_min=d_min, d_max=d_max,
+                                       person_d_min_m=params.person_d_min_fraction * d_des_m,
+                                       active=below_top, params=params)
         if terms.approach and in_formation:
             near = below_top & (surface < params.approach_range_m)
             if np.any(near):

@@ -195,7 +195,7 @@ def _obstacles_conditions(counts: Iterable[int]) -> tuple[Condition, ...]:
             settings=(
                 ("vehicles", PAPER_VEHICLES_OBSTACLES),
                 ("method", "active"),
-                ("trees", n if n > 0 else "none"),
+                ("trees", str(n) if n > 0 else "none"),
                 ("person", "random"),
             ),
         )

@@ -53,7 +53,7 @@ def test_commloss_protocol_sweeps_the_papers_loss_levels_with_8_mavs_3_runs_each
 def test_obstacles_protocol_sweeps_0_to_20_obstacles_with_5_mavs_5_runs_of_180_s():
     p = exp.paper_protocol("obstacles")
     assert [c.x for c in p.conditions] == [0.0, 5.0, 10.0, 15.0, 20.0]
-    assert [dict(c.settings)["trees"] for c in p.conditions] == ["none", 5, 10, 15, 20]
+    assert [dict(c.settings)["trees"] for c in p.conditions] == ["none", "5", "10", "15", "20"]
     assert {dict(c.settings)["vehicles"] for c in p.conditions} == {5}
     assert p.durations_s == (180.0,) * 5
 
