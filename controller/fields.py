@@ -2,10 +2,10 @@
 
 The non-convex constraints of the formation (angular spacing 2 pi / K about the person, distance to teammates,
 trees, virtual obstacles and the person) enter the convex MPC as external accelerations f(n), one per horizon
-step n = 0..N, computed here from positions only. Equation numbers are the paper's as published (RA-L 2019):
+step n = 0..N, computed here from positions only. Equation numbers are those of the published paper (RA-L 2019):
 eq. 12 (`act_force_mag`), 13 (`actforce`), 14 (`rep_dyn`), 15 (`rep_sta`), 16 (`clamping`), 17 (`guarantee`).
 
-Every force is horizontal (z = 0), as in the authors' code. Arrays are ENU metres; forces are m/s^2 because they
+Every force is horizontal (z = 0), as in the authors' code. Positions are ENU metres; forces are m/s^2 because they
 enter the dynamics as accelerations. Everything here is a pure function of its arguments.
 """
 
@@ -27,73 +27,87 @@ class FieldParams:
     """Gains and thresholds of the external inputs (METHOD.md "The external inputs"). Distances in m, angles
     in rad, forces in m/s^2 (they enter the dynamics as accelerations).
 
-    Tuning (measured in tests/controller/test_closed_loop.py, 10 Hz, K = 2..16 from clustered starts; the
-    numbers are in the module comments next to each choice):
+    The values were tuned in closed loop: K = 2..16 MAVs starting 2 m apart on one side of the person, 10 Hz
+    control, the MPC with the paper's weights and the pass-through reference of reference.py, vehicles either
+    following their plans exactly or through a PX4-like cascade; then a person walking at 1 m/s, and the paper's
+    path with its 13 trees. Measured with these values: convergence to < 5 deg / 0.5 m / 0.3 m in 10-16 s for every
+    K, minimum separation 1.73 m, tangential speed <= 1.8 m/s; on the paper's path with trees (K = 3, 5, 8) mean
+    spacing error 3-5 deg and tree clearance >= 1.08 m (tests/controller/test_closed_loop.py pins the first two).
 
-    gain: G of every cotangential field (the original's 50).
-    f_max_mps2: clamp on the norm of the total input (eq. 16), above the input authority (3 m/s^2 per axis) so
+    gain: G of the angular (active-tracking) field, the original's 50.
+    f_max_mps2: clamp on the norm of the total input (eq. 16); above the input authority (3 m/s^2 per axis) so
         that a close teammate or trunk wins over the MPC, as the guarantee (eq. 17) asks.
-    freeze_fraction: where the field stops growing: its argument z is held at (pi/2) * freeze_fraction at and
-        below d_min (METHOD.md's eps freeze), so F is finite there and strictly decreasing above d_min.
+    freeze_fraction: the field's argument z rises linearly from (pi/2) * freeze_fraction at d_min to pi/2 at d_max
+        and is held below d_min (METHOD.md's eps freeze): F is finite, saturated below d_min and strictly
+        decreasing above. 0.2 rather than 0.1 halves the slope near d_min (10 Hz control of a squeezed pair).
 
-    tracking_c: c of eq. 12, the force factor left on the circle. Raised from the paper's 0.1 so that the last
-        degrees of spacing converge (Pitfall 3); with c = 1 the factor (|r_des - rho| + c) is >= 1.
-    tracking_min_fraction: d_min of the angular field as a fraction of its d_max = 2 pi / K. The original's
-        d_min = 1 rad^2 on the squared angle inverts the thresholds for K >= 7; a fixed fraction keeps
-        d_min < 2 pi / K for every K, and a fraction near 1 makes the field steep close to 2 pi / K, whose cubic
-        tail (F ~ (d_max - d)^3) otherwise stalls the formation 10-50 degrees short (Pitfall 3).
-    tracking_max_mps2: separate clamp on the norm of the active-tracking sum (eq. 13), below the input authority
-        so that the MPC can always hold the MAV on the circle while it slides along it (Pitfall 2).
+    tracking_c: c of eq. 12. 1 instead of the paper's 0.1 so that the force on the circle is not ten times weaker
+        than off it (the later original code also raised it to 1).
+    tracking_min_fraction: the angular field's d_min as a fraction of its d_max = 2 pi / K. The original's
+        d_min = 1 rad^2 on the squared angle inverts the thresholds for K >= 7; a fraction keeps d_min < 2 pi / K
+        for every K. Near d_max the field decays like (d_max - d)^3 / D^4 (D = d_max - d_min), which stalled the
+        prototype 10-50 deg short (Pitfall 3); 0.7 makes it steep: K = 2 then converges in 13 s instead of 21 s
+        (0.5), and the final error is 0.1-1.3 deg instead of 0.7-3.4 deg.
+    tracking_max_mps2: clamp on the norm of the active-tracking sum (eq. 13), below the input authority (Pitfall 2).
+        With the pass-through reference the MAV slides at about this value (m/s per m/s^2) round the circle: 1
+        gives 1-1.8 m/s, fast enough for every K and slow enough that neighbours never meet at speed.
 
     teammate_d_min_m: d_min of eq. 17 = e_max + v_max dt (1 m way-point tracking error + 5 m/s * 0.1 s).
-    teammate_d_max_base_m: d_max of a fresh plan from a teammate with zero localisation covariance; eq. 17 adds
-        both MAVs' covariance radii (sqrt of the largest eigenvalue) and teammate_speed_mps * message age. With
-        the default 0.25 m^2 covariances the fresh d_max is 3.0 m, below the 3.12 m chord of 16 MAVs on an 8 m
-        circle, so a finished formation feels no repulsion.
-    teammate_speed_mps: |v_max| of eq. 17 used to grow d_max with the age of the teammate's plan.
-    teammate_age_grace_s: message age that adds nothing to d_max: plans are aligned to our clock by their stamp,
-        so only staleness beyond one publish period is uncertain.
+    teammate_d_max_base_m: d_max for a fresh plan and zero covariances; eq. 17 adds both MAVs' covariance radii
+        (square root of the largest eigenvalue) and teammate_speed_mps * (message age - teammate_age_grace_s).
+        With the default 0.25 m^2 covariances a fresh d_max is 3.0 m, below the 3.12 m chord of 16 MAVs on an
+        8 m circle, so a finished formation feels no repulsion.
+    teammate_speed_mps: |v_max| of eq. 17, growing d_max with the plan's age.
+    teammate_age_grace_s: plans are aligned to our clock by their stamp, so only age beyond one publish period is
+        uncertain.
+    teammate_peak_mps2, obstacle_peak_mps2, person_peak_mps2: the repulsion fields' value at (and below) d_min;
+        the paper clamps them to F_max there. Their gain follows from the peak (`peak_gain`): with the original
+        G = 50 the teammate field reached 8 m/s^2 already 0.7 m outside d_min, and a MAV squeezed between two
+        neighbours (2 m apart at the start) was shot out at 4-5 m/s into the next one.
 
-    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 15 as distances to the cylinder's SURFACE (distance to
-        the axis minus the radius), so a thick trunk and a thin one keep the same clearance.
+    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 15 on the distance to the cylinder's SURFACE (distance to
+        the axis minus the radius), so thick and thin trunks keep the same clearance.
+    obstacle_slide, slide_max_mps2: a tree on the circle blocks a MAV sliding along it with a purely tangential
+        push (a local minimum that the approach-angle input does not address); obstacle_slide times the tangential
+        part of each repulsion also pushes the MAV radially around the trunk, the sum clamped at slide_max_mps2.
+        Without it the prototype's MAVs stayed stuck between two trees 61 deg apart (spacing error 140 deg, K = 3).
 
     person_d_min_fraction, person_d_max_fraction: the person as an obstacle, thresholds as fractions of d_des
         (METHOD.md: 7 m and 8 m for d_des = 8 m).
 
-    approach_range_m: an obstacle whose surface is closer than this to the MAV steers its approach angle.
+    approach_range_m: an obstacle whose surface is closer than this to the MAV and that lies inside the MAV's
+        radius about the person (between the MAV and the person, with its clearance) steers the approach angle.
     approach_angle_rad: d_max of the approach-angle field, an angular difference about the person.
-    approach_max_mps2: clamp of the approach-angle sum, below the input authority for the same reason as the
-        active-tracking clamp (a tangential push beyond the authority runs the MAV off the circle).
+    approach_max_mps2: clamp of the approach-angle sum. At 2 m/s^2 (above tracking_max_mps2) it overrode the
+        spacing near trees (K = 3 on the paper's path: mean spacing error 21 deg vs 5 deg at 1).
 
     dqmpc_d_min_m, dqmpc_d_max_m: the DQMPC baseline's repulsion thresholds (METHOD.md "Baselines").
     """
 
     gain: float = 50.0
     f_max_mps2: float = 8.0
-    freeze_fraction: float = 0.1
+    freeze_fraction: float = 0.2
     tracking_c: float = 1.0
-    tracking_min_fraction: float = 0.5
-    tracking_max_mps2: float = 2.0
+    tracking_min_fraction: float = 0.7
+    tracking_max_mps2: float = 1.0
     teammate_d_min_m: float = 1.5
     teammate_d_max_base_m: float = 2.0
     teammate_speed_mps: float = 5.0
     teammate_age_grace_s: float = 0.1
+    teammate_peak_mps2: float = 8.0
     obstacle_d_min_m: float = 1.5
     obstacle_d_max_m: float = 3.0
-    person_d_min_fraction: float = 7.0 / 8.0
-    person_d_max_fraction: float = 1.0
-    approach_range_m: float = 3.0
-    approach_angle_rad: float = 0.5
-    approach_max_mps2: float = 2.0
-    dqmpc_d_min_m: float = 1.0
-    dqmpc_d_max_m: float = 4.0
-    anticipate: bool = False
-    tracking_pair_clamp: bool = False
+    obstacle_peak_mps2: float = 8.0
     obstacle_slide: float = 1.0
     slide_max_mps2: float = 2.0
-    teammate_peak_mps2: float = 8.0
-    obstacle_peak_mps2: float = 8.0
+    person_d_min_fraction: float = 7.0 / 8.0
+    person_d_max_fraction: float = 1.0
     person_peak_mps2: float = 8.0
+    approach_range_m: float = 3.0
+    approach_angle_rad: float = 0.5
+    approach_max_mps2: float = 1.0
+    dqmpc_d_min_m: float = 1.0
+    dqmpc_d_max_m: float = 4.0
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
@@ -101,12 +115,14 @@ class FieldParams:
                 raise ValueError(f"FieldParams.{name} must be a finite number >= 0, got {value}")
         if not 0.0 < self.freeze_fraction < 1.0:
             raise ValueError("FieldParams.freeze_fraction must lie in (0, 1)")
-        if not 0.0 <= self.tracking_min_fraction < 1.0:
+        if not self.tracking_min_fraction < 1.0:
             raise ValueError("FieldParams.tracking_min_fraction must lie in [0, 1): d_min < 2 pi / K")
         if self.obstacle_d_min_m >= self.obstacle_d_max_m or self.dqmpc_d_min_m >= self.dqmpc_d_max_m:
             raise ValueError("FieldParams: every d_min must be below its d_max")
         if self.person_d_min_fraction >= self.person_d_max_fraction:
             raise ValueError("FieldParams: person_d_min_fraction must be below person_d_max_fraction")
+        if self.approach_angle_rad <= 0.0:
+            raise ValueError("FieldParams.approach_angle_rad must be > 0")
 
 
 @dataclass(frozen=True)
@@ -200,17 +216,18 @@ class ExternalInputs:
     fault: bool = False
 
 
-def cotangential_magnitude(d, *, d_min, d_max, gain: float, freeze_fraction: float = 0.1):
+# --------------------------------------------------------------------------------------------- field shape
+def cotangential_magnitude(d, *, d_min, d_max, gain, freeze_fraction: float = 0.2):
     """Cotangential field magnitude F(d) (paper Sec. III-E; METHOD.md "Potential-field magnitude").
 
     F(d) = G (pi/2) / D * (cot z + z - pi/2) with D = d_max - d_min and z rising linearly from
-    z0 = (pi/2) * freeze_fraction at d = d_min to pi/2 at d = d_max. So F(d_max) = 0, F = 0 beyond, F is strictly
-    decreasing on (d_min, d_max) (dF/dz = -G (pi/2)/D cot^2 z), and it is held at the finite F(d_min) below
-    d_min. This is the original field with its pole moved just below d_min, instead of the original's flat
-    freeze over [d_min, d_min + 0.1], so the function is strictly monotone above d_min.
+    z0 = (pi/2) * freeze_fraction at d = d_min to pi/2 at d = d_max. So F(d_max) = 0 and F = 0 beyond, F is
+    strictly decreasing on (d_min, d_max) (dF/dz = -G (pi/2)/D cot^2 z < 0), and it is held at the finite F(d_min)
+    below d_min: the original field with its pole moved just below d_min, instead of the original's flat freeze
+    over [d_min, d_min + 0.1], so the function stays strictly monotone above d_min.
 
-    d, d_min, d_max: floats or arrays that broadcast (d_min < d_max elementwise). Returns a float for scalar
-    arguments, else an array of the broadcast shape.
+    d, d_min, d_max, gain: floats or arrays that broadcast (d_min < d_max elementwise). Returns a float for
+    scalar arguments, else an array of the broadcast shape.
     """
     d_arr = np.asarray(d, dtype=float)
     lo = np.asarray(d_min, dtype=float)
@@ -220,24 +237,46 @@ def cotangential_magnitude(d, *, d_min, d_max, gain: float, freeze_fraction: flo
     z0 = HALF_PI * freeze_fraction
     frac = np.clip((d_arr - lo) / span, 0.0, 1.0)
     z = z0 + (HALF_PI - z0) * frac
-    out = (gain * HALF_PI) / span * (1.0 / np.tan(z) + z - HALF_PI)
+    out = (np.asarray(gain, dtype=float) * HALF_PI) / span * (1.0 / np.tan(z) + z - HALF_PI)
     out = np.where(frac >= 1.0, 0.0, np.maximum(out, 0.0))
     return float(out) if out.ndim == 0 else out
 
 
+def peak_gain(peak, *, d_min, d_max, freeze_fraction: float):
+    """The gain G that makes the cotangential field equal `peak` at (and below) d_min."""
+    z0 = HALF_PI * freeze_fraction
+    return peak * (np.asarray(d_max, dtype=float) - d_min) / (HALF_PI * (1.0 / np.tan(z0) + z0 - HALF_PI))
+
+
+def clamp_norm(vectors: np.ndarray, limit: float) -> np.ndarray:
+    """Scale every row of (..., k) whose norm exceeds limit down to norm limit (eq. 16's rule)."""
+    norms = np.sqrt(np.einsum("...i,...i->...", vectors, vectors))
+    scale = np.minimum(1.0, limit / np.maximum(norms, 1e-300))
+    return vectors * scale[..., None]
+
+
+# --------------------------------------------------------------------------------------------- teammates
 def plan_path(plan: HorizonPlan, *, now_s: float, dt_s: float, steps: int) -> np.ndarray:
-    """(steps, 3) a teammate's planned positions at our times now_s + n dt_s, n = 0..steps-1.
+    """(steps, 3) a plan's positions at our times now_s + n dt_s, n = 0..steps-1.
 
     The plan is shifted by its age and linearly interpolated; before its x(0) and beyond its last state it is
-    held (a plan older than its horizon is the teammate's last planned position).
+    held (a plan older than its horizon gives the teammate's last planned position).
     """
+    return _aligned(plan.positions_m[None], np.array([plan.stamp_s]), np.array([plan.dt_s]),
+                    now_s=now_s, dt_s=dt_s, steps=steps)[0]
+
+
+def _aligned(positions: np.ndarray, stamps: np.ndarray, plan_dts: np.ndarray, *, now_s: float, dt_s: float,
+             steps: int) -> np.ndarray:
+    """(J, steps, 3) plans (J, L, 3) stamped stamps (J,) with steps plan_dts (J,) sampled at now_s + n dt_s."""
+    last = positions.shape[1] - 1
     t = now_s + dt_s * np.arange(steps)
-    last = len(plan.positions_m) - 1
-    k = np.clip((t - plan.stamp_s) / plan.dt_s, 0.0, float(last))
-    lo = np.minimum(np.floor(k).astype(int), last)
+    k = np.clip((t[None, :] - stamps[:, None]) / plan_dts[:, None], 0.0, float(last))
+    lo = np.minimum(k.astype(int), last)
     hi = np.minimum(lo + 1, last)
-    a = (k - lo)[:, None]
-    return (1.0 - a) * plan.positions_m[lo] + a * plan.positions_m[hi]
+    a = (k - lo)[..., None]
+    rows = np.arange(positions.shape[0])[:, None]
+    return (1.0 - a) * positions[rows, lo] + a * positions[rows, hi]
 
 
 def covariance_radius_m(cov_m2: np.ndarray) -> float:
@@ -250,50 +289,46 @@ def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, s
                    current_position_only: bool = False) -> TeammatePaths:
     """Align every teammate's latest plan to our horizon and compute its eq. 17 d_max.
 
-    d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace), the
+    d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace): the
     guarantee's r_sigma_k + r_sigma_j + r_comm on top of a fixed base. current_position_only (the `price`
-    baseline, which shares no plans) uses only each plan's x(0), held over the horizon. Plans must be finite
-    (the formation controller rejects and counts the others before calling this).
+    baseline, which shares no plans) holds each plan's x(0) over the horizon. Plans must be finite (the formation
+    controller rejects and counts the others first).
     """
     if not plans:
         return TeammatePaths.empty(steps)
-    paths = np.empty((len(plans), steps, 3))
-    d_max = np.empty(len(plans))
-    for i, plan in enumerate(plans):
-        if current_position_only:
-            paths[i] = plan.positions_m[0]
+    stamps = np.array([p.stamp_s for p in plans])
+    if current_position_only:
+        paths = np.repeat(np.array([p.positions_m[0] for p in plans])[:, None, :], steps, axis=1)
+    else:
+        lengths = {len(p.positions_m) for p in plans}
+        if len(lengths) == 1:
+            paths = _aligned(np.stack([p.positions_m for p in plans]), stamps, np.array([p.dt_s for p in plans]),
+                             now_s=now_s, dt_s=dt_s, steps=steps)
         else:
-            paths[i] = plan_path(plan, now_s=now_s, dt_s=dt_s, steps=steps)
-        age = max(now_s - plan.stamp_s - params.teammate_age_grace_s, 0.0)
-        d_max[i] = (params.teammate_d_max_base_m + own_cov_radius_m + covariance_radius_m(plan.position_cov_m2)
-                    + params.teammate_speed_mps * age)
+            paths = np.stack([plan_path(p, now_s=now_s, dt_s=dt_s, steps=steps) for p in plans])
+    radii = np.array([covariance_radius_m(p.position_cov_m2) for p in plans])
+    age = np.maximum(now_s - stamps - params.teammate_age_grace_s, 0.0)
+    d_max = params.teammate_d_max_base_m + own_cov_radius_m + radii + params.teammate_speed_mps * age
     ids = np.array([p.vehicle_id for p in plans], dtype=int)
     in_formation = np.array([p.in_formation for p in plans], dtype=bool)
     return TeammatePaths(paths, ids, in_formation, d_max)
 
 
-def clamp_norm(vectors: np.ndarray, limit: float) -> np.ndarray:
-    """Scale every row of (..., k) whose norm exceeds limit down to norm limit (eq. 16's rule)."""
-    norms = np.sqrt(np.einsum("...i,...i->...", vectors, vectors))
-    scale = np.minimum(1.0, limit / np.maximum(norms, 1e-300))
-    return vectors * scale[..., None]
-
-
+# --------------------------------------------------------------------------------------------- the terms
 def _tangents(rel_xy: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Counter-clockwise unit tangents (..., 2) of the circles about the person; zero where rho ~ 0."""
     safe = np.where(rho > 1e-9, rho, np.inf)
     return np.stack((-rel_xy[..., 1], rel_xy[..., 0]), axis=-1) / safe[..., None]
 
 
-def _away(diff_xy: np.ndarray, dist: np.ndarray, tie_sign: np.ndarray | float) -> np.ndarray:
+def _away(diff_xy: np.ndarray, dist: np.ndarray, tie_sign) -> np.ndarray:
     """Unit vectors along diff_xy (..., 2); where dist ~ 0, +-x by tie_sign so that two MAVs split."""
     unit = diff_xy / np.where(dist > 1e-9, dist, np.inf)[..., None]
     tie = dist <= 1e-9
     if np.any(tie):
-        unit = unit.copy()
         fallback = np.zeros_like(unit)
         fallback[..., 0] = np.broadcast_to(tie_sign, dist.shape)
-        unit[tie] = fallback[tie]
+        unit = np.where(tie[..., None], fallback, unit)
     return unit
 
 
@@ -306,11 +341,12 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
                     own_id: int, team_size: int, d_des_m: float, params: FieldParams) -> np.ndarray:
     """Active-tracking input (eqs. 12-13), (N+1, 2), before its clamp.
 
-    rel_xy (N+1, 2) own horizontal position minus the person's, rho (N+1,) its norm; mates_rel_xy (J, N+1, 2)
-    the in-formation teammates' positions minus the person's. For every teammate j the magnitude is
-    (|d_des - rho| + c) F(delta) with delta in [0, pi] the angle between the two bearings about the person,
-    thresholds d_min = tracking_min_fraction * 2 pi / K, d_max = 2 pi / K; the direction is the tangent of the
-    circle about the person that points away from j (exact ties split by vehicle id).
+    rel_xy (N+1, 2): own horizontal position minus the person's, rho (N+1,) its norm; mates_rel_xy (J, N+1, 2): the
+    in-formation teammates' positions minus the person's. For every teammate j the magnitude is
+    (|d_des - rho| + c) F(delta), delta in [0, pi] the angle between the two bearings about the person (the plain
+    angle, not the original's squared one), thresholds d_min = tracking_min_fraction * 2 pi / K and
+    d_max = 2 pi / K; the direction is the tangent to the circle about the person that points away from j
+    (an exact tie is split by vehicle id).
     """
     if mates_rel_xy.shape[0] == 0 or team_size < 2:
         return np.zeros_like(rel_xy)
@@ -322,36 +358,21 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
                                  gain=params.gain, freeze_fraction=params.freeze_fraction)
     side = np.sign(signed)
     side = np.where(side == 0.0, np.where(own_id < mate_ids, -1.0, 1.0)[:, None], side)
-    pair = (np.abs(d_des_m - rho) + params.tracking_c)[None, :] * mag
-    if params.tracking_pair_clamp:
-        pair = np.minimum(pair, params.tracking_max_mps2)
-    scalar = (pair * side).sum(axis=0)
+    scalar = (np.abs(d_des_m - rho) + params.tracking_c) * (mag * side).sum(axis=0)
     return scalar[:, None] * _tangents(rel_xy, rho)
 
 
-def peak_gain(peak, *, d_min, d_max, freeze_fraction: float):
-    """The gain G that makes the cotangential field equal `peak` at (and below) d_min."""
-    z0 = HALF_PI * freeze_fraction
-    return peak * (np.asarray(d_max, dtype=float) - d_min) / (HALF_PI * (1.0 / np.tan(z0) + z0 - HALF_PI))
-
-
 def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, peak: float, params: FieldParams,
-                     tie_sign: np.ndarray | float = 1.0, active: np.ndarray | None = None,
-                     anticipate: bool = False) -> np.ndarray:
-    """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eqs. 14, 15), (N+1, 2).
+                     tie_sign=1.0) -> np.ndarray:
+    """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eq. 14), (N+1, 2).
 
-    diff_xy (M, N+1, 2) from each obstacle to us, dist (M, N+1) the distance the thresholds apply to, d_min and
-    d_max broadcast against dist; active (M, N+1) masks entries out.
+    diff_xy (M, N+1, 2) from each source to us; dist (M, N+1) the distance the thresholds apply to; d_min and
+    d_max broadcast against dist; the field equals `peak` at d_min.
     """
     if diff_xy.shape[0] == 0:
         return np.zeros(diff_xy.shape[1:])
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
-    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain,
-                                 freeze_fraction=params.freeze_fraction)
-    if active is not None:
-        mag = np.where(active, mag, 0.0)
-    if anticipate:
-        mag = np.maximum.accumulate(mag[:, ::-1], axis=1)[:, ::-1]
+    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction)
     norm = np.sqrt(np.einsum("...i,...i->...", diff_xy, diff_xy))
     return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)
 
@@ -359,30 +380,29 @@ def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, pea
 def obstacle_inputs(*, diff_xy: np.ndarray, surface: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray,
                     person_xy: np.ndarray, obstacles: ObstacleSet, d_min: float, d_max: float,
                     person_d_min_m: float, active: np.ndarray, params: FieldParams) -> np.ndarray:
-    """Static and virtual obstacle input (eq. 15) plus a radial slide, (N+1, 2).
+    """Static and virtual obstacle input (eq. 15) with its radial slide, (N+1, 2).
 
-    diff_xy (M, N+1, 2) from each axis to us; surface (M, N+1) distance to each cylinder's surface. The repulsion
-    F(surface) points away from the axis. An obstacle on the circle about the person blocks a MAV sliding along
-    the circle with a purely tangential push, a local minimum the approach-angle input does not resolve; so the
-    tangential part of each repulsion also pushes the MAV radially around the obstacle, by obstacle_slide times
-    |tangential part|: outwards (away from the person), or inwards when the MAV is inside the obstacle's radius
-    and the passage between the obstacle and the person's safety radius is wide enough.
+    diff_xy (M, N+1, 2) from each axis to us; surface (M, N+1) the distance to each cylinder's surface; active
+    (M, N+1) masks cylinders the MAV is above. The repulsion F(surface) points away from the axis. The slide
+    (FieldParams.obstacle_slide) adds obstacle_slide * F * |tangential part of the direction| along the radius
+    about the person: outwards, or inwards when the MAV is inside the obstacle's radius and the passage between
+    the obstacle's clearance and the person's d_min is open; the slide sum is clamped at slide_max_mps2.
     """
     gain = peak_gain(params.obstacle_peak_mps2, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
     mag = cotangential_magnitude(surface, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction)
     mag = np.where(active, mag, 0.0)
-    axis_dist = surface + obstacles.radii_m[:, None]
-    unit = _away(diff_xy, axis_dist, 1.0)
+    unit = _away(diff_xy, surface + obstacles.radii_m[:, None], 1.0)
     force = (mag[..., None] * unit).sum(axis=0)
     if params.obstacle_slide > 0.0 and np.any(mag > 0.0):
-        radial = rel_xy / np.where(rho > 1e-9, rho, np.inf)[:, None]
         tangent = _tangents(rel_xy, rho)
         blocked = np.abs(np.einsum("mni,ni->mn", unit, tangent))
-        rho_m = np.linalg.norm(obstacles.centers_m[:, None, :] - person_xy[None], axis=-1)
-        inner_gap = rho_m - obstacles.radii_m[:, None] - d_min - person_d_min_m
-        side = np.where((rho[None, :] < rho_m) & (inner_gap > 0.0), -1.0, 1.0)
+        rho_m = np.sqrt(np.einsum("mni,mni->mn", obstacles.centers_m[:, None, :] - person_xy[None],
+                                  obstacles.centers_m[:, None, :] - person_xy[None]))
+        inner_open = rho_m - obstacles.radii_m[:, None] - d_min > person_d_min_m
+        side = np.where((rho[None, :] < rho_m) & inner_open, -1.0, 1.0)
         slide = np.clip((params.obstacle_slide * mag * blocked * side).sum(axis=0), -params.slide_max_mps2,
                         params.slide_max_mps2)
+        radial = rel_xy / np.where(rho > 1e-9, rho, np.inf)[:, None]
         force = force + slide[:, None] * radial
     return force
 
@@ -391,25 +411,26 @@ def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, 
                     obstacles: ObstacleSet, active: np.ndarray, params: FieldParams) -> np.ndarray:
     """Approach-angle input against local minima behind obstacles, (N+1, 2), before its clamp.
 
-    For an obstacle whose surface is within approach_range_m of the MAV (active (M, N+1) masks the rest), a
-    tangential push of magnitude F(|gamma_k - gamma_m|) (thresholds 0 and approach_angle_rad about the person)
-    times a ramp (1 - surface distance / approach_range_m), pointing away from the obstacle's bearing about the
-    person (the original always pushed counter-clockwise).
+    An obstacle counts when active (M, N+1) (its surface within approach_range_m of the MAV) and it lies inside
+    the MAV's radius about the person with its clearance (rho_m + radius + obstacle_d_min_m < rho): it is then in
+    the MAV's line of approach (and of sight). The push is tangential, of magnitude F(|gamma_k - gamma_m|)
+    (thresholds 0 and approach_angle_rad about the person) times the ramp (1 - surface / approach_range_m), and
+    points away from the obstacle's bearing (the original always pushed counter-clockwise).
     """
     if obstacles.count == 0:
         return np.zeros_like(rel_xy)
-    obs_rel = obstacles.centers_m[:, None, :] - person_xy
+    obs_rel = obstacles.centers_m[:, None, :] - person_xy[None]
     gamma_m = np.arctan2(obs_rel[..., 1], obs_rel[..., 0])
     gamma = np.arctan2(rel_xy[:, 1], rel_xy[:, 0])
     signed = _wrap(gamma[None, :] - gamma_m)
     mag = cotangential_magnitude(np.abs(signed), d_min=0.0, d_max=params.approach_angle_rad, gain=params.gain,
                                  freeze_fraction=params.freeze_fraction)
-    surface = (np.linalg.norm(own_xy[None, :, :] - obstacles.centers_m[:, None, :], axis=-1)
-               - obstacles.radii_m[:, None])
+    diff = own_xy[None, :, :] - obstacles.centers_m[:, None, :]
+    surface = np.sqrt(np.einsum("mni,mni->mn", diff, diff)) - obstacles.radii_m[:, None]
     ramp = np.clip(1.0 - surface / params.approach_range_m, 0.0, 1.0)
-    side = np.where(signed >= 0.0, 1.0, -1.0)
-    rho_m = np.linalg.norm(obs_rel, axis=-1)
+    rho_m = np.sqrt(np.einsum("mni,mni->mn", obs_rel, obs_rel))
     in_line = rho_m + obstacles.radii_m[:, None] + params.obstacle_d_min_m < rho[None, :]
+    side = np.where(signed >= 0.0, 1.0, -1.0)
     scalar = np.where(active & in_line, mag * ramp * side, 0.0).sum(axis=0)
     return scalar[:, None] * _tangents(rel_xy, rho)
 
@@ -419,14 +440,14 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
                     terms: FieldTerms, own_id: int = 0, in_formation: bool = True) -> ExternalInputs:
     """Every external input for horizon steps n = 0..N and their clamped total (eqs. 12-16).
 
-    own_positions_m: (N+1, 3) our position at step n (the previous plan, the current position at n = 0);
-    person_position_m: (3,) or (N+1, 3) the fused person estimate (per step if predicted over the horizon);
-    teammates: all teammates (in formation or not); obstacles: trees and virtual obstacles; team_size: K, the
-    number of MAVs in formation including us; in_formation: False drops our own active-tracking term.
+    own_positions_m: (N+1, 3) our position at step n (the previous plan, the start position at n = 0);
+    person_position_m: (3,) or (N+1, 3) the fused person estimate (per step when predicted over the horizon);
+    teammates: all teammates (in formation or not); obstacles: trees and virtual obstacles (vertical cylinders);
+    team_size: K, the MAVs in formation including us; in_formation: False drops our own angular terms.
 
-    total = clamp_{f_max}(clamp_{tracking_max}(f_act) + f_dyn + f_sta + f_person + clamp_{approach_max}(f_ang)),
-    METHOD.md Pitfall 2: the tangential terms are clamped below the input authority on their own, the safety
-    terms only by the total clamp. A non-finite total becomes zero with fault=True.
+    total = clamp_{f_max}(clamp_{tracking_max}(f_act) + f_dyn + f_sta + f_person + clamp_{approach_max}(f_ang)):
+    METHOD.md Pitfall 2, the tangential steering terms are clamped below the input authority on their own, the
+    safety terms only by the total clamp (eq. 16). A non-finite total becomes zero with fault=True.
     """
     own = np.asarray(own_positions_m, dtype=float)
     steps = own.shape[0]
@@ -437,14 +458,13 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
     zero = np.zeros((steps, 2))
     tracking = teammate = obstacle = person = approach = zero
 
-    if terms.tracking and in_formation and teammates.count:
+    if terms.tracking and in_formation and teammates.count and np.any(teammates.in_formation):
         mates = teammates.in_formation
-        if np.any(mates):
-            mates_rel = teammates.positions_m[mates, :, :2] - person_xy[None]
-            tracking = clamp_norm(tracking_inputs(rel_xy=rel, rho=rho, mates_rel_xy=mates_rel,
-                                                  mate_ids=teammates.vehicle_ids[mates], own_id=own_id,
-                                                  team_size=team_size, d_des_m=d_des_m, params=params),
-                                  params.tracking_max_mps2)
+        mates_rel = teammates.positions_m[mates, :, :2] - person_xy[None]
+        tracking = clamp_norm(tracking_inputs(rel_xy=rel, rho=rho, mates_rel_xy=mates_rel,
+                                              mate_ids=teammates.vehicle_ids[mates], own_id=own_id,
+                                              team_size=team_size, d_des_m=d_des_m, params=params),
+                              params.tracking_max_mps2)
 
     if terms.teammates and teammates.count:
         diff = own_xy[None] - teammates.positions_m[..., :2]
@@ -455,9 +475,8 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
             d_min = params.teammate_d_min_m
             d_max = np.maximum(teammates.d_max_m, d_min + 1e-3)[:, None]
         tie = np.where(own_id < teammates.vehicle_ids, -1.0, 1.0)[:, None]
-        teammate = repulsion_inputs(diff_xy=diff, dist=dist, d_min=d_min, d_max=d_max, params=params,
-                                    peak=params.teammate_peak_mps2,
-                                    tie_sign=tie, anticipate=params.anticipate)
+        teammate = repulsion_inputs(diff_xy=diff, dist=dist, d_min=d_min, d_max=d_max,
+                                    peak=params.teammate_peak_mps2, params=params, tie_sign=tie)
 
     if (terms.obstacles or terms.approach) and obstacles.count:
         diff = own_xy[None] - obstacles.centers_m[:, None, :]
@@ -468,7 +487,7 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
             d_min, d_max = params.obstacle_d_min_m, params.obstacle_d_max_m
         # A cylinder counts only where the MAV is not clearly above its top.
         below_top = own[None, :, 2] < obstacles.heights_m[:, None] + d_min
-        if terms.obstacles:
+        if terms.obstacles and np.any(below_top & (surface < d_max)):
             obstacle = obstacle_inputs(diff_xy=diff, surface=surface, rel_xy=rel, rho=rho, person_xy=person_xy,
                                        obstacles=obstacles, d_min=d_min, d_max=d_max,
                                        person_d_min_m=params.person_d_min_fraction * d_des_m,
@@ -482,9 +501,9 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
 
     if terms.person:
         lo, hi = params.person_d_min_fraction * d_des_m, params.person_d_max_fraction * d_des_m
-        if hi > 0.0 and np.any(rho < hi):
-            person = repulsion_inputs(diff_xy=rel[None], dist=rho[None], d_min=lo, d_max=hi, params=params,
-                                      peak=params.person_peak_mps2)
+        if hi > lo and np.any(rho < hi):
+            person = repulsion_inputs(diff_xy=rel[None], dist=rho[None], d_min=lo, d_max=hi,
+                                      peak=params.person_peak_mps2, params=params)
 
     total_xy = clamp_norm(tracking + teammate + obstacle + person + approach, params.f_max_mps2)
     fault = not bool(np.all(np.isfinite(total_xy)))

@@ -10,9 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 
+from controller.baselines import PriceParams
 from controller.fields import FieldParams
 from controller.measurement import NoiseParams
 from controller.mpc import MpcParams
+from controller.reference import ReferenceParams
 from controller.tracker import TrackerParams
 
 
@@ -45,3 +47,5 @@ class ControllerParams:
     fields: FieldParams = field(default_factory=FieldParams)
     tracker: TrackerParams = field(default_factory=TrackerParams)
     noise: NoiseParams = field(default_factory=NoiseParams)
+    reference: ReferenceParams = field(default_factory=ReferenceParams)
+    price: PriceParams = field(default_factory=PriceParams)

@@ -24,6 +24,7 @@ from server.commands import (
     check_obstacle,
     limits_from_params,
 )
+from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
 from webui.view import CameraView, Range, SceneView, VehicleView
 
@@ -55,7 +56,7 @@ class GroundStation:
         self._on_shutdown = on_shutdown
         self._stale_s = link_stale_s
         self._obstacle_height_m = virtual_obstacle_height_m
-        self._camera = camera or CameraView()
+        self._camera = camera or camera_view(CameraParams())
         self._lock = threading.RLock()
         self._next_obstacle = 1
         self._refused = 0
@@ -241,6 +242,13 @@ class GroundStation:
     def _changed(self) -> None:
         self._snapshot = None
         self._view = None
+
+
+def camera_view(params: CameraParams) -> CameraView:
+    """The frustum drawn for a camera: vertical field of view 2 atan(height / (2 fy)), aspect width/height."""
+    return CameraView(vertical_fov_rad=2.0 * math.atan(params.height_px / (2.0 * params.fy_px)),
+                      aspect=params.width_px / params.height_px, pitch_down_rad=params.pitch_down_rad,
+                      forward_offset_m=params.offset_forward_m)
 
 
 def vehicle_view(v: VehicleSnapshot, *, link_stale_s: float) -> VehicleView:

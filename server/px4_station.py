@@ -4,7 +4,8 @@ The same `GroundStation`, `Mission` and agents as the embedded simulation; only 
 person and the camera/detector stay the embedded model, driven by the vehicles' telemetry poses and attitudes
 (`TelemetryBody`), so the detections come from where the real vehicles are and how they are tilted. Mission
 time runs from 0 at real time; telemetry is stamped on it so link ages in the operator's view are right,
-while each vehicle's set-point watchdog runs on the wall clock and survives a stalled control loop.
+while each vehicle's set-point watchdog runs on the wall clock in its back-end and so fires even when the
+control loop stalls.
 """
 
 from __future__ import annotations
@@ -66,8 +67,9 @@ def build_px4_station(fleet: Px4Fleet, *, seed: int = 0, method: Method = Method
     """A ground station over connected PX4 vehicles; the embedded person and detector see them through their
     telemetry. The seed fixes the person's walk (random mode), the random trees and the detector noise.
 
-    Mission time starts at 0 (the person's script runs from there) and is paced at real time; the vehicles'
-    telemetry is stamped on it, while their watchdogs keep running on the wall clock."""
+    Mission time starts at 0 (the person's script runs from there) and the live runner paces it at real time;
+    the vehicles' telemetry is stamped on it (its age carried over from the wall clock), so link ages are
+    right even when the runner falls behind."""
     root = np.random.SeedSequence(seed)
     person_ss, trees_ss, links_ss, detectors_ss = root.spawn(4)
     model = _person(person, np.random.default_rng(person_ss))
@@ -90,7 +92,7 @@ def build_px4_station(fleet: Px4Fleet, *, seed: int = 0, method: Method = Method
                       controller_params=ControllerParams(method=method), clock=time.perf_counter)
     station = GroundStation(mission=mission, control_period_s=1.0 / rate_hz)
     for a in fleet.autopilots:
-        a.use_stamp_clock(lambda: station.time_s)  # telemetry ages in mission time, whatever the pacing
+        a.use_stamp_clock(lambda: station.time_s)
     return station
 
 

@@ -23,12 +23,13 @@ log = logging.getLogger(__name__)
 def build_station(*, vehicles: int, seed: int, method: Method, trees: str, person: str, rate_hz: float):
     """A ground station over the embedded simulation: `vehicles` simulated MAVs, the paper's (or no, or N
     random) trees and the walking (random, still) person, ticking at rate_hz."""
-    from server.ground_station import GroundStation
+    from server.ground_station import GroundStation, camera_view
     from vehicles.scenario import Scenario, build_sim
 
     setup = build_sim(Scenario(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person),
                       clock=time.perf_counter)
-    return GroundStation(mission=setup.mission, control_period_s=1.0 / rate_hz)
+    return GroundStation(mission=setup.mission, control_period_s=1.0 / rate_hz,
+                         camera=camera_view(setup.world.camera))
 
 
 def run(station, *, host: str, port: int, viser_port: int, speed: float) -> None:

@@ -1,4 +1,4 @@
-"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release (vehicles/px4_supervisor.py)."""
+"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release (vehicles/px4_supervisor)."""
 
 from __future__ import annotations
 
