@@ -1,16 +1,18 @@
 """The `price` baseline's potential field (Price et al., RA-L 2018), applied after the MPC.
 
-Price et al. (METHOD.md "Baselines") steer each MAV with an MPC to the point on the d_des circle (zero terminal
-velocity, terminal weight 1000, input weight 0.1, no external inputs) and then correct its way-point with a
+Price et al. (METHOD.md "Baselines") steer each MAV with an MPC to the point on the d_des circle (zero
+terminal velocity, terminal weight 1000, input weight 0.1, no external inputs) and then correct its way-point
+with a
 potential field: repulsion from the teammates' current positions and attraction to that goal point. They share
 no horizon plans: a `price` MAV uses only x(0) of each received plan, the teammate's position when it planned
 (the plan is still published, for the ground station's display). There is no angular-spacing term. skyring's
-field also repels from trees and virtual obstacles (surface distance, the same thresholds as eq. 15): without it
-the baseline flew through the paper's trees, which says nothing about formation control.
+field also repels from trees and virtual obstacles (surface distance, the same thresholds as eq. 15): without
+it the baseline flew through the paper's trees, which says nothing about formation control.
 
-The field f (m/s^2, horizontal) is computed at the MAV's start position and then added to the MPC's inputs over
-the whole horizon (the plan is rolled out again with it, `mpc.predict`): the way-point, the published plan and the
-next tick's reference state all include it, so its effect accumulates from tick to tick as a field's should.
+The field f (m/s^2, horizontal) is computed at the MAV's start position and then added to the MPC's inputs
+over the whole horizon (the plan is rolled out again with it, `mpc.predict`): the way-point, the published
+plan and the next tick's reference state all include it, so its effect accumulates from tick to tick as a
+field's should.
 """
 
 from __future__ import annotations
@@ -48,7 +50,8 @@ def _repulsion(diff: np.ndarray, dist: np.ndarray, *, d_min: float, d_max, peak:
                fields: FieldParams) -> np.ndarray:
     """(2,) sum of cotangential repulsions F(dist) (J,) along diff (J, 2)."""
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=fields.freeze_fraction)
-    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=fields.freeze_fraction)
+    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain,
+                                 freeze_fraction=fields.freeze_fraction)
     norm = np.sqrt(np.einsum("ji,ji->j", diff, diff))
     return (mag[:, None] * diff / np.where(norm > 1e-9, norm, np.inf)[:, None]).sum(axis=0)
 

@@ -2,11 +2,12 @@
 
 The non-convex constraints of the formation (angular spacing 2 pi / K about the person, distance to teammates,
 trees, virtual obstacles and the person) enter the convex MPC as external accelerations f(n), one per horizon
-step n = 0..N, computed here from positions only. Equation numbers are those of the published paper (RA-L 2019):
-eq. 12 (`act_force_mag`), 13 (`actforce`), 14 (`rep_dyn`), 15 (`rep_sta`), 16 (`clamping`), 17 (`guarantee`).
+step n = 0..N, computed here from positions only. Equation numbers are those of the published paper (RA-L
+2019): eq. 12 (`act_force_mag`), 13 (`actforce`), 14 (`rep_dyn`), 15 (`rep_sta`), 16 (`clamping`), 17
+(`guarantee`).
 
-Every force is horizontal (z = 0), as in the authors' code. Positions are ENU metres; forces are m/s^2 because they
-enter the dynamics as accelerations. Everything here is a pure function of its arguments.
+Every force is horizontal (z = 0), as in the authors' code. Positions are ENU metres; forces are m/s^2 because
+they enter the dynamics as accelerations. Everything here is a pure function of its arguments.
 """
 
 from __future__ import annotations
@@ -29,54 +30,60 @@ class FieldParams:
 
     The values were tuned in closed loop: K = 2..16 MAVs starting 2 m apart on one side of the person, 10 Hz
     control, the MPC with the paper's weights and the pass-through reference of reference.py, vehicles either
-    following their plans exactly or through a PX4-like cascade; then a person walking at 1 m/s, and the paper's
-    path with its 13 trees. Measured with these values: convergence to < 5 deg / 0.5 m / 0.3 m in 10-16 s for every
-    K, minimum separation 1.73 m, tangential speed <= 1.8 m/s; on the paper's path with trees (K = 3, 5, 8) mean
-    spacing error 3-5 deg and tree clearance >= 1.08 m (tests/controller/test_closed_loop.py pins the first two).
+    following their plans exactly or through a PX4-like cascade; then a person walking at 1 m/s, and the
+    paper's path with its 13 trees. Measured with these values: convergence to < 5 deg / 0.5 m / 0.3 m in
+    10-16 s for every K, minimum separation 1.73 m, tangential speed <= 1.8 m/s; on the paper's path with
+    trees (K = 3, 5, 8) mean spacing error 3-5 deg and tree clearance >= 1.08 m
+    (tests/controller/test_closed_loop.py pins the first two).
 
     gain: G of the angular (active-tracking) field, the original's 50.
     f_max_mps2: clamp on the norm of the total input (eq. 16); above the input authority (3 m/s^2 per axis) so
         that a close teammate or trunk wins over the MPC, as the guarantee (eq. 17) asks.
-    freeze_fraction: the field's argument z rises linearly from (pi/2) * freeze_fraction at d_min to pi/2 at d_max
-        and is held below d_min (METHOD.md's eps freeze): F is finite, saturated below d_min and strictly
-        decreasing above. 0.2 rather than 0.1 halves the slope near d_min (10 Hz control of a squeezed pair).
+    freeze_fraction: the field's argument z rises linearly from (pi/2) * freeze_fraction at d_min to pi/2 at
+        d_max and is held below d_min (METHOD.md's eps freeze): F is finite, saturated below d_min and
+        strictly decreasing above. 0.2 rather than 0.1 halves the slope near d_min (10 Hz control of a
+        squeezed pair).
 
-    tracking_c: c of eq. 12. 1 instead of the paper's 0.1 so that the force on the circle is not ten times weaker
-        than off it (the later original code also raised it to 1).
+    tracking_c: c of eq. 12. 1 instead of the paper's 0.1 so that the force on the circle is not ten times
+        weaker than off it (the later original code also raised it to 1).
     tracking_min_fraction: the angular field's d_min as a fraction of its d_max = 2 pi / K. The original's
-        d_min = 1 rad^2 on the squared angle inverts the thresholds for K >= 7; a fraction keeps d_min < 2 pi / K
-        for every K. Near d_max the field decays like (d_max - d)^3 / D^4 (D = d_max - d_min), which stalled the
-        prototype 10-50 deg short (Pitfall 3); 0.7 makes it steep: K = 2 then converges in 13 s instead of 21 s
-        (0.5), and the final error is 0.1-1.3 deg instead of 0.7-3.4 deg.
-    tracking_max_mps2: clamp on the norm of the active-tracking sum (eq. 13), below the input authority (Pitfall 2).
-        With the pass-through reference the MAV slides at about this value (m/s per m/s^2) round the circle: 1
-        gives 1-1.8 m/s, fast enough for every K and slow enough that neighbours never meet at speed.
+        d_min = 1 rad^2 on the squared angle inverts the thresholds for K >= 7; a fraction keeps
+        d_min < 2 pi / K for every K. Near d_max the field decays like (d_max - d)^3 / D^4
+        (D = d_max - d_min), which stalled the prototype 10-50 deg short (Pitfall 3); 0.7 makes it steep:
+        K = 2 then converges in 13 s instead of 21 s (0.5), and the final error is 0.1-1.3 deg instead of
+        0.7-3.4 deg.
+    tracking_max_mps2: clamp on the norm of the active-tracking sum (eq. 13), below the input authority
+        (Pitfall 2). With the pass-through reference the MAV slides at about this value (m/s per m/s^2) round
+        the circle: 1 gives 1-1.8 m/s, fast enough for every K and slow enough that neighbours never meet at
+        speed.
 
     teammate_d_min_m: d_min of eq. 17 = e_max + v_max dt (1 m way-point tracking error + 5 m/s * 0.1 s).
-    teammate_d_max_base_m: d_max for a fresh plan and zero covariances; eq. 17 adds both MAVs' covariance radii
-        (square root of the largest eigenvalue) and teammate_speed_mps * (message age - teammate_age_grace_s).
-        With the default 0.25 m^2 covariances a fresh d_max is 3.0 m, below the 3.12 m chord of 16 MAVs on an
-        8 m circle, so a finished formation feels no repulsion.
+    teammate_d_max_base_m: d_max for a fresh plan and zero covariances; eq. 17 adds both MAVs' covariance
+        radii (square root of the largest eigenvalue) and teammate_speed_mps * (message age -
+        teammate_age_grace_s). With the default 0.25 m^2 covariances a fresh d_max is 3.0 m, below the 3.12 m
+        chord of 16 MAVs on an 8 m circle, so a finished formation feels no repulsion.
     teammate_speed_mps: |v_max| of eq. 17, growing d_max with the plan's age.
-    teammate_age_grace_s: plans are aligned to our clock by their stamp, so only age beyond one publish period is
-        uncertain.
-    teammate_peak_mps2, obstacle_peak_mps2, person_peak_mps2: the repulsion fields' value at (and below) d_min;
-        the paper clamps them to F_max there. Their gain follows from the peak (`peak_gain`): with the original
-        G = 50 the teammate field reached 8 m/s^2 already 0.7 m outside d_min, and a MAV squeezed between two
-        neighbours (2 m apart at the start) was shot out at 4-5 m/s into the next one.
+    teammate_age_grace_s: plans are aligned to our clock by their stamp, so only age beyond one publish period
+        is uncertain.
+    teammate_peak_mps2, obstacle_peak_mps2, person_peak_mps2: the repulsion fields' value at (and below)
+        d_min; the paper clamps them to F_max there. Their gain follows from the peak (`peak_gain`): with the
+        original G = 50 the teammate field reached 8 m/s^2 already 0.7 m outside d_min, and a MAV squeezed
+        between two neighbours (2 m apart at the start) was shot out at 4-5 m/s into the next one.
 
-    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 15 on the distance to the cylinder's SURFACE (distance to
-        the axis minus the radius), so thick and thin trunks keep the same clearance.
-    obstacle_slide, slide_max_mps2: a tree on the circle blocks a MAV sliding along it with a purely tangential
-        push (a local minimum that the approach-angle input does not address); obstacle_slide times the tangential
-        part of each repulsion also pushes the MAV radially around the trunk, the sum clamped at slide_max_mps2.
-        Without it the prototype's MAVs stayed stuck between two trees 61 deg apart (spacing error 140 deg, K = 3).
+    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 15 on the distance to the cylinder's SURFACE
+        (distance to the axis minus the radius), so thick and thin trunks keep the same clearance.
+    obstacle_slide, slide_max_mps2: a tree on the circle blocks a MAV sliding along it with a purely
+        tangential push (a local minimum that the approach-angle input does not address); obstacle_slide times
+        the tangential part of each repulsion also pushes the MAV radially around the trunk, the sum clamped
+        at slide_max_mps2. Without it the prototype's MAVs stayed stuck between two trees 61 deg apart
+        (spacing error 140 deg, K = 3).
 
     person_d_min_fraction, person_d_max_fraction: the person as an obstacle, thresholds as fractions of d_des
         (METHOD.md: 7 m and 8 m for d_des = 8 m).
 
     approach_range_m: an obstacle whose surface is closer than this to the MAV and that lies inside the MAV's
-        radius about the person (between the MAV and the person, with its clearance) steers the approach angle.
+        radius about the person (between the MAV and the person, with its clearance) steers the approach
+        angle.
     approach_angle_rad: d_max of the approach-angle field, an angular difference about the person.
     approach_max_mps2: clamp of the approach-angle sum. At 2 m/s^2 (above tracking_max_mps2) it overrode the
         spacing near trees (K = 3 on the paper's path: mean spacing error 21 deg vs 5 deg at 1).
@@ -129,8 +136,8 @@ class FieldParams:
 class FieldTerms:
     """Which external inputs a method uses (METHOD.md "Baselines").
 
-    active: every term. dqmpc: teammate and obstacle repulsion only, with its own thresholds. price: none inside
-    the MPC (its repulsion is applied after the MPC, see baselines.py).
+    active: every term. dqmpc: teammate and obstacle repulsion only, with its own thresholds. price: none
+    inside the MPC (its repulsion is applied after the MPC, see baselines.py).
     """
 
     tracking: bool = True
@@ -186,7 +193,8 @@ class ObstacleSet:
 
     @classmethod
     def from_obstacles(cls, obstacles: Sequence[Obstacle]) -> ObstacleSet:
-        """Stack obstacles; one with a non-finite centre is dropped (callers count `len(obstacles) - count`)."""
+        """Stack obstacles; one with a non-finite centre is dropped (callers count `len(obstacles) -
+        count`)."""
         kept = [o for o in obstacles if np.all(np.isfinite(o.center_m))]
         if not kept:
             return cls(np.zeros((0, 2)), np.zeros(0), np.zeros(0))
@@ -222,9 +230,10 @@ def cotangential_magnitude(d, *, d_min, d_max, gain, freeze_fraction: float = 0.
 
     F(d) = G (pi/2) / D * (cot z + z - pi/2) with D = d_max - d_min and z rising linearly from
     z0 = (pi/2) * freeze_fraction at d = d_min to pi/2 at d = d_max. So F(d_max) = 0 and F = 0 beyond, F is
-    strictly decreasing on (d_min, d_max) (dF/dz = -G (pi/2)/D cot^2 z < 0), and it is held at the finite F(d_min)
-    below d_min: the original field with its pole moved just below d_min, instead of the original's flat freeze
-    over [d_min, d_min + 0.1], so the function stays strictly monotone above d_min.
+    strictly decreasing on (d_min, d_max) (dF/dz = -G (pi/2)/D cot^2 z < 0), and it is held at the finite
+    F(d_min)
+    below d_min: the original field with its pole moved just below d_min, instead of the original's flat
+    freeze over [d_min, d_min + 0.1], so the function stays strictly monotone above d_min.
 
     d, d_min, d_max, gain: floats or arrays that broadcast (d_min < d_max elementwise). Returns a float for
     scalar arguments, else an array of the broadcast shape.
@@ -268,7 +277,8 @@ def plan_path(plan: HorizonPlan, *, now_s: float, dt_s: float, steps: int) -> np
 
 def _aligned(positions: np.ndarray, stamps: np.ndarray, plan_dts: np.ndarray, *, now_s: float, dt_s: float,
              steps: int) -> np.ndarray:
-    """(J, steps, 3) plans (J, L, 3) stamped stamps (J,) with steps plan_dts (J,) sampled at now_s + n dt_s."""
+    """(J, steps, 3) plans (J, L, 3) stamped stamps (J,) with steps plan_dts (J,) sampled at now_s + n
+    dt_s."""
     last = positions.shape[1] - 1
     t = now_s + dt_s * np.arange(steps)
     k = np.clip((t[None, :] - stamps[:, None]) / plan_dts[:, None], 0.0, float(last))
@@ -291,8 +301,8 @@ def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, s
 
     d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace): the
     guarantee's r_sigma_k + r_sigma_j + r_comm on top of a fixed base. current_position_only (the `price`
-    baseline, which shares no plans) holds each plan's x(0) over the horizon. Plans must be finite (the formation
-    controller rejects and counts the others first).
+    baseline, which shares no plans) holds each plan's x(0) over the horizon. Plans must be finite (the
+    formation controller rejects and counts the others first).
     """
     if not plans:
         return TeammatePaths.empty(steps)
@@ -302,8 +312,9 @@ def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, s
     else:
         lengths = {len(p.positions_m) for p in plans}
         if len(lengths) == 1:
-            paths = _aligned(np.stack([p.positions_m for p in plans]), stamps, np.array([p.dt_s for p in plans]),
-                             now_s=now_s, dt_s=dt_s, steps=steps)
+            plan_dts = np.array([p.dt_s for p in plans])
+            stacked = np.stack([p.positions_m for p in plans])
+            paths = _aligned(stacked, stamps, plan_dts, now_s=now_s, dt_s=dt_s, steps=steps)
         else:
             paths = np.stack([plan_path(p, now_s=now_s, dt_s=dt_s, steps=steps) for p in plans])
     radii = np.array([covariance_radius_m(p.position_cov_m2) for p in plans])
@@ -341,10 +352,10 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
                     own_id: int, team_size: int, d_des_m: float, params: FieldParams) -> np.ndarray:
     """Active-tracking input (eqs. 12-13), (N+1, 2), before its clamp.
 
-    rel_xy (N+1, 2): own horizontal position minus the person's, rho (N+1,) its norm; mates_rel_xy (J, N+1, 2): the
-    in-formation teammates' positions minus the person's. For every teammate j the magnitude is
-    (|d_des - rho| + c) F(delta), delta in [0, pi] the angle between the two bearings about the person (the plain
-    angle, not the original's squared one), thresholds d_min = tracking_min_fraction * 2 pi / K and
+    rel_xy (N+1, 2): own horizontal position minus the person's, rho (N+1,) its norm; mates_rel_xy (J, N+1,
+    2): the in-formation teammates' positions minus the person's. For every teammate j the magnitude is
+    (|d_des - rho| + c) F(delta), delta in [0, pi] the angle between the two bearings about the person (the
+    plain angle, not the original's squared one), thresholds d_min = tracking_min_fraction * 2 pi / K and
     d_max = 2 pi / K; the direction is the tangent to the circle about the person that points away from j
     (an exact tie is split by vehicle id).
     """
@@ -372,7 +383,8 @@ def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, pea
     if diff_xy.shape[0] == 0:
         return np.zeros(diff_xy.shape[1:])
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
-    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction)
+    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain,
+                                 freeze_fraction=params.freeze_fraction)
     norm = np.sqrt(np.einsum("...i,...i->...", diff_xy, diff_xy))
     return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)
 
@@ -385,11 +397,13 @@ def obstacle_inputs(*, diff_xy: np.ndarray, surface: np.ndarray, rel_xy: np.ndar
     diff_xy (M, N+1, 2) from each axis to us; surface (M, N+1) the distance to each cylinder's surface; active
     (M, N+1) masks cylinders the MAV is above. The repulsion F(surface) points away from the axis. The slide
     (FieldParams.obstacle_slide) adds obstacle_slide * F * |tangential part of the direction| along the radius
-    about the person: outwards, or inwards when the MAV is inside the obstacle's radius and the passage between
-    the obstacle's clearance and the person's d_min is open; the slide sum is clamped at slide_max_mps2.
+    about the person: outwards, or inwards when the MAV is inside the obstacle's radius and the passage
+    between the obstacle's clearance and the person's d_min is open; the slide sum is clamped at
+    slide_max_mps2.
     """
-    gain = peak_gain(params.obstacle_peak_mps2, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
-    mag = cotangential_magnitude(surface, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction)
+    freeze = params.freeze_fraction
+    gain = peak_gain(params.obstacle_peak_mps2, d_min=d_min, d_max=d_max, freeze_fraction=freeze)
+    mag = cotangential_magnitude(surface, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=freeze)
     mag = np.where(active, mag, 0.0)
     unit = _away(diff_xy, surface + obstacles.radii_m[:, None], 1.0)
     force = (mag[..., None] * unit).sum(axis=0)
@@ -411,11 +425,12 @@ def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, 
                     obstacles: ObstacleSet, active: np.ndarray, params: FieldParams) -> np.ndarray:
     """Approach-angle input against local minima behind obstacles, (N+1, 2), before its clamp.
 
-    An obstacle counts when active (M, N+1) (its surface within approach_range_m of the MAV) and it lies inside
-    the MAV's radius about the person with its clearance (rho_m + radius + obstacle_d_min_m < rho): it is then in
-    the MAV's line of approach (and of sight). The push is tangential, of magnitude F(|gamma_k - gamma_m|)
-    (thresholds 0 and approach_angle_rad about the person) times the ramp (1 - surface / approach_range_m), and
-    points away from the obstacle's bearing (the original always pushed counter-clockwise).
+    An obstacle counts when active (M, N+1) (its surface within approach_range_m of the MAV) and it lies
+    inside the MAV's radius about the person with its clearance (rho_m + radius + obstacle_d_min_m < rho): it
+    is then in the MAV's line of approach (and of sight). The push is tangential, of magnitude F(|gamma_k -
+    gamma_m|) (thresholds 0 and approach_angle_rad about the person) times the ramp (1 - surface /
+    approach_range_m), and points away from the obstacle's bearing (the original always pushed
+    counter-clockwise).
     """
     if obstacles.count == 0:
         return np.zeros_like(rel_xy)
@@ -442,12 +457,14 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
 
     own_positions_m: (N+1, 3) our position at step n (the previous plan, the start position at n = 0);
     person_position_m: (3,) or (N+1, 3) the fused person estimate (per step when predicted over the horizon);
-    teammates: all teammates (in formation or not); obstacles: trees and virtual obstacles (vertical cylinders);
+    teammates: all teammates (in formation or not); obstacles: trees and virtual obstacles (vertical
+    cylinders);
     team_size: K, the MAVs in formation including us; in_formation: False drops our own angular terms.
 
-    total = clamp_{f_max}(clamp_{tracking_max}(f_act) + f_dyn + f_sta + f_person + clamp_{approach_max}(f_ang)):
-    METHOD.md Pitfall 2, the tangential steering terms are clamped below the input authority on their own, the
-    safety terms only by the total clamp (eq. 16). A non-finite total becomes zero with fault=True.
+    total = clamp_{f_max}(clamp_{tracking_max}(f_act) + f_dyn + f_sta + f_person +
+    clamp_{approach_max}(f_ang)): METHOD.md Pitfall 2, the tangential steering terms are clamped below the
+    input authority on their own, the safety terms only by the total clamp (eq. 16). A non-finite total
+    becomes zero with fault=True.
     """
     own = np.asarray(own_positions_m, dtype=float)
     steps = own.shape[0]
@@ -488,8 +505,8 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
         # A cylinder counts only where the MAV is not clearly above its top.
         below_top = own[None, :, 2] < obstacles.heights_m[:, None] + d_min
         if terms.obstacles and np.any(below_top & (surface < d_max)):
-            obstacle = obstacle_inputs(diff_xy=diff, surface=surface, rel_xy=rel, rho=rho, person_xy=person_xy,
-                                       obstacles=obstacles, d_min=d_min, d_max=d_max,
+            obstacle = obstacle_inputs(diff_xy=diff, surface=surface, rel_xy=rel, rho=rho,
+                                       person_xy=person_xy, obstacles=obstacles, d_min=d_min, d_max=d_max,
                                        person_d_min_m=params.person_d_min_fraction * d_des_m,
                                        active=below_top, params=params)
         if terms.approach and in_formation:

@@ -1,17 +1,18 @@
-"""One MAV's formation controller: person estimate, teammates' plans and obstacles in, horizon plan and way-point out.
+"""One MAV's formation controller: person estimate, teammates' plans and obstacles in; horizon plan and
+way-point out.
 
-Per step (paper Sec. III, DESIGN.md "One MAV's loop", steps 3-4): check every input; start from the previous plan's
-state at `now` on a leash to the measured state (reference.py); compute the external inputs f(0..N) on the
-previous plan (fields.py); aim at the terminal reference moved by what the inputs add (pass-through); solve the
-MPC (mpc.py); publish the plan and send its state `waypoint_step` ahead, with the yaw that faces the person.
+Per step (paper Sec. III, DESIGN.md "One MAV's loop", steps 3-4): check every input; start from the previous
+plan's state at `now` on a leash to the measured state (reference.py); compute the external inputs f(0..N)
+on the previous plan (fields.py); aim at the terminal reference moved by what the inputs add (pass-through);
+solve the MPC (mpc.py); publish the plan; send its state `waypoint_step` ahead with the yaw facing the person.
 
-Methods (METHOD.md "Baselines"): `active` (every input), `dqmpc` (teammate and obstacle repulsion only, with its
-thresholds 1 m / 4 m), `price` (MPC to the d_des circle point with zero terminal velocity, weights 1000 / 0.1, no
-inputs in the MPC, a field on the way-point afterwards, teammates' current positions only; baselines.py).
+Methods (METHOD.md "Baselines"): `active` (every input), `dqmpc` (teammate and obstacle repulsion only, with
+its thresholds 1 m / 4 m), `price` (MPC to the d_des circle point with zero terminal velocity, weights
+1000 / 0.1, no inputs in the MPC, a field added after it, teammates' current positions only; baselines.py).
 
-Bad input never raises and never yields a NaN way-point: a non-finite own state, person estimate, time or operator
-parameter gives a braking plan (SolveStatus.BRAKING with the reason in `fault`); a non-finite teammate plan or
-obstacle is dropped and counted; no person estimate gives a braking plan to rest (SolveStatus.NO_PERSON).
+Bad input never raises and never yields a NaN way-point: a non-finite own state, person estimate, time or
+operator parameter gives a braking plan (SolveStatus.BRAKING, the reason in `fault`); a non-finite teammate
+plan or obstacle is dropped and counted; no person estimate gives a braking plan to rest (NO_PERSON).
 """
 
 from __future__ import annotations
@@ -50,15 +51,17 @@ from controller.reference import (
     terminal_reference,
 )
 
+DEFAULT_COV_M2 = np.eye(3) * 0.25
+
 
 @dataclass(frozen=True)
 class ControllerStats:
     """Counters since construction (or `reset`): what the controller did and what it refused.
 
-    ticks = solved + braking + no_person. rejected_plans / rejected_obstacles: teammate plans and obstacles dropped
-    for non-finite numbers (or a plan claiming our own id); rejected_inputs: ticks whose own state, person estimate,
-    time or formation parameters were not usable; field_faults: non-finite external-input totals replaced by zero;
-    ignored_bearings: non-finite preferred bearings ignored.
+    ticks = solved + braking + no_person. rejected_plans / rejected_obstacles: teammate plans and obstacles
+    dropped for non-finite numbers (or a plan carrying our own id); rejected_inputs: ticks whose own state,
+    person estimate, time or formation parameters were not usable; field_faults: non-finite external-input
+    totals replaced by zero; ignored_bearings: non-finite preferred bearings ignored.
     """
 
     ticks: int = 0
@@ -72,13 +75,25 @@ class ControllerStats:
     ignored_bearings: int = 0
 
 
+@dataclass(frozen=True, eq=False)
+class _Tick:
+    """What one step knows before planning: its time, own state, person, role and the MPC's start state."""
+
+    now_s: float
+    own: VehicleState
+    person: PersonEstimate | None
+    in_formation: bool
+    start_p: np.ndarray
+    start_v: np.ndarray
+
+
 def _finite(*arrays) -> bool:
     return all(bool(np.all(np.isfinite(a))) for a in arrays)
 
 
 class FormationController:
-    """The formation controller of MAV `vehicle_id` (one per MAV; it keeps the MPC's warm start, its previous plan
-    and counters, nothing else)."""
+    """The formation controller of MAV `vehicle_id`, one per MAV. It keeps the MPC's warm start, its own
+    previous plan (the reference it is being flown along) and counters; nothing else."""
 
     def __init__(self, *, vehicle_id: int, params: ControllerParams) -> None:
         self._id = int(vehicle_id)
@@ -122,84 +137,66 @@ class FormationController:
     def step(self, *, now_s: float, own: VehicleState, person: PersonEstimate | None,
              teammates: Sequence[HorizonPlan], obstacles: Sequence[Obstacle], formation: FormationParams,
              in_formation: bool = True, preferred_bearing_rad: float | None = None) -> ControlOutput:
-        """Plan one control tick at now_s (s, the caller's clock) and return the plan and the way-point.
+        """Plan one control tick at now_s (s, the caller's clock); return the plan and the way-point.
 
         teammates: the latest plan of each teammate (any age; in_formation ones count for K and the spacing);
-        obstacles: trees and virtual obstacles; formation: the operator's d_des / h_des; in_formation: False for a
-        MAV that left formation control (its plan says so, and it neither spaces itself nor steers its approach);
-        preferred_bearing_rad: when given, the terminal reference lies at this ENU bearing about the person (the
-        roster slot 2 pi k / K of a MAV without fresh teammate information) instead of the current bearing.
+        obstacles: trees and virtual obstacles; formation: the operator's d_des / h_des; in_formation: False
+        for a MAV that left formation control (its plan says so; it neither spaces itself nor steers its
+        approach angle); preferred_bearing_rad: when given, the terminal reference lies at this ENU bearing
+        about the person (the roster slot 2 pi k / K of a MAV without fresh teammate information) instead of
+        at the current bearing.
         """
         self._counts["ticks"] += 1
-        reason = self._invalid_reason(now_s, own, person, formation)
         start_p, start_v = self._start_state(now_s, own)
+        tick = _Tick(now_s, own, person, in_formation, start_p, start_v)
+        reason = self._invalid_reason(now_s, own, person, formation)
         if reason is not None:
             self._counts["rejected_inputs"] += 1
-            return self._brake(now_s, own, start_p, start_v, person, in_formation, SolveStatus.BRAKING, reason)
+            return self._brake(tick, SolveStatus.BRAKING, reason)
         if person is None:
-            return self._brake(now_s, own, start_p, start_v, None, in_formation, SolveStatus.NO_PERSON,
-                               "no person estimate")
+            return self._brake(tick, SolveStatus.NO_PERSON, "no person estimate")
         if preferred_bearing_rad is not None and not np.isfinite(preferred_bearing_rad):
             self._counts["ignored_bearings"] += 1
             preferred_bearing_rad = None
 
-        prm = self._params
         mp = self._mpc_params
-        dt = mp.dt_s
         price = self._method == Method.PRICE
-        plans = self._usable_plans(teammates)
         obstacle_set = self._obstacles(obstacles)
-        mates = teammate_paths(plans, now_s=now_s, dt_s=dt, steps=self._steps,
-                               own_cov_radius_m=self._own_cov_radius(own), params=prm.fields,
+        mates = teammate_paths(self._usable_plans(teammates), now_s=now_s, dt_s=mp.dt_s, steps=self._steps,
+                               own_cov_radius_m=self._own_cov_radius(own), params=self._params.fields,
                                current_position_only=price)
-        team_size = 1 + int(np.count_nonzero(mates.in_formation))
-        person_p = np.asarray(person.position_m, dtype=float)
-        person_v = np.asarray(person.velocity_mps, dtype=float)
-
         if price:
             f_total = np.zeros((self._steps, 3))
-            target, target_v = terminal_reference(position_m=start_p, person_position_m=person_p,
-                                                  person_velocity_mps=np.zeros(3), d_des_m=formation.d_des_m,
-                                                  h_des_m=formation.h_des_m, horizon_s=0.0,
-                                                  params=prm.reference, preferred_bearing_rad=preferred_bearing_rad)
         else:
-            f_total = self._inputs(now_s, start_p, person_p, person_v, mates, obstacle_set, team_size, formation,
-                                   in_formation)
-            target, target_v = terminal_reference(position_m=start_p, person_position_m=person_p,
-                                                  person_velocity_mps=person_v, d_des_m=formation.d_des_m,
-                                                  h_des_m=formation.h_des_m, horizon_s=self._steps * dt,
-                                                  params=prm.reference, preferred_bearing_rad=preferred_bearing_rad)
-            if prm.reference.pass_through:
-                shift_p, shift_v = input_displacement(f_total, dt_s=dt)
-                target, target_v = target + shift_p, target_v + shift_v
-        target = clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m)
+            f_total = self._inputs(tick, mates, obstacle_set, formation)
+        target, target_v = self._target(tick, f_total, formation, preferred_bearing_rad, price)
 
         sol = self._mpc.solve(position_m=start_p, velocity_mps=start_v, target_position_m=target,
                               target_velocity_mps=target_v, external_inputs_mps2=f_total)
         if not sol.ok:
-            return self._brake(now_s, own, start_p, start_v, person, in_formation, SolveStatus.BRAKING,
-                               f"MPC: {sol.message or sol.status}", iterations=sol.iterations,
-                               solve_time_s=sol.solve_time_s)
+            return self._brake(tick, SolveStatus.BRAKING, f"MPC: {sol.message or sol.status}",
+                               iterations=sol.iterations, solve_time_s=sol.solve_time_s)
 
         positions, velocities = sol.positions_m, sol.velocities_mps
         if price:
             field = price_field(own_position_m=start_p, goal_position_m=target,
-                                teammate_positions_m=mates.positions_m[:, 0, :], teammate_d_max_m=mates.d_max_m,
-                                obstacles=obstacle_set, fields=prm.fields, params=prm.price)
+                                teammate_positions_m=mates.positions_m[:, 0, :],
+                                teammate_d_max_m=mates.d_max_m, obstacles=obstacle_set,
+                                fields=self._params.fields, params=self._params.price)
             f_total = np.repeat(field[None, :], self._steps, axis=0)
-            positions, velocities = predict(position_m=start_p, velocity_mps=start_v, inputs_mps2=sol.inputs_mps2,
-                                            external_inputs_mps2=f_total, params=mp)
-        plan = self._plan(now_s, own, positions, velocities, in_formation)
+            positions, velocities = predict(position_m=start_p, velocity_mps=start_v,
+                                            inputs_mps2=sol.inputs_mps2, external_inputs_mps2=f_total,
+                                            params=mp)
+        plan = self._plan(tick, positions, velocities)
         wp_p, wp_v = self._waypoint(plan)
         if not _finite(wp_p, wp_v):
-            return self._brake(now_s, own, start_p, start_v, person, in_formation, SolveStatus.BRAKING,
-                               "the way-point was not finite")
+            return self._brake(tick, SolveStatus.BRAKING, "the way-point was not finite")
         self._prev_plan = plan
         self._counts["solved"] += 1
-        return ControlOutput(plan=plan, waypoint_position_m=wp_p, waypoint_velocity_mps=wp_v,
-                             yaw_rad=bearing_rad(from_m=wp_p, to_m=person_p), status=SolveStatus.SOLVED,
-                             external_inputs=f_total, fault=None, solver_iterations=sol.iterations,
-                             solver_time_s=sol.solve_time_s)
+        yaw = bearing_rad(from_m=wp_p, to_m=np.asarray(person.position_m, dtype=float))
+        return ControlOutput(plan=plan, waypoint_position_m=wp_p, waypoint_velocity_mps=wp_v, yaw_rad=yaw,
+                             status=SolveStatus.SOLVED, external_inputs=f_total, fault=None,
+                             solver_iterations=sol.iterations, solver_time_s=sol.solve_time_s)
 
     # ------------------------------------------------------------------------------------------ internals
     def _invalid_reason(self, now_s: float, own: VehicleState, person: PersonEstimate | None,
@@ -209,8 +206,9 @@ class FormationController:
             return "the time is not finite"
         if not _finite(own.position_m, own.velocity_mps):
             return "own state is not finite"
-        if not (np.isfinite(formation.d_des_m) and formation.d_des_m > 0.0 and np.isfinite(formation.h_des_m)):
-            return f"invalid formation parameters d_des={formation.d_des_m} h_des={formation.h_des_m}"
+        d_des, h_des = formation.d_des_m, formation.h_des_m
+        if not (np.isfinite(d_des) and d_des > 0.0 and np.isfinite(h_des)):
+            return f"invalid formation parameters d_des={d_des} h_des={h_des}"
         if person is not None and not _finite(person.position_m, person.velocity_mps):
             return "person estimate is not finite"
         return None
@@ -226,35 +224,36 @@ class FormationController:
         return plan_state_at(plan.positions_m, plan.velocities_mps, elapsed_s=elapsed, dt_s=plan.dt_s)
 
     def _start_state(self, now_s: float, own: VehicleState) -> tuple[np.ndarray, np.ndarray]:
-        """The MPC's initial state: the reference on a leash to the measurement (or a safe stand-in for it)."""
+        """The MPC's initial state: the reference on a leash to the measurement (or a stand-in for it)."""
         ref_p, ref_v = self._reference_state(now_s)
         pos = np.asarray(own.position_m, dtype=float)
         vel = np.asarray(own.velocity_mps, dtype=float)
         if _finite(pos, vel):
             self._last_position = pos.copy()
-            return initial_state(measured_position_m=pos, measured_velocity_mps=vel, reference_position_m=ref_p,
-                                 reference_velocity_mps=ref_v, params=self._params.reference)
+            return initial_state(measured_position_m=pos, measured_velocity_mps=vel,
+                                 reference_position_m=ref_p, reference_velocity_mps=ref_v,
+                                 params=self._params.reference)
         if ref_p is not None:
             return ref_p, ref_v
         mp = self._mpc_params
-        fallback = self._last_position if self._last_position is not None else clip_into(
-            np.zeros(3), lower_m=mp.position_min_m, upper_m=mp.position_max_m)
-        return fallback.copy(), np.zeros(3)
+        if self._last_position is not None:
+            return self._last_position.copy(), np.zeros(3)
+        return clip_into(np.zeros(3), lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
 
     def _usable_plans(self, teammates: Sequence[HorizonPlan]) -> list[HorizonPlan]:
         """Teammate plans with finite numbers, a positive step and another MAV's id; the rest are counted."""
         usable = [p for p in teammates
-                  if p.vehicle_id != self._id and np.isfinite(p.stamp_s) and np.isfinite(p.dt_s) and p.dt_s > 0.0
-                  and _finite(p.positions_m, p.position_cov_m2)]
+                  if p.vehicle_id != self._id and np.isfinite(p.stamp_s) and np.isfinite(p.dt_s)
+                  and p.dt_s > 0.0 and _finite(p.positions_m, p.position_cov_m2)]
         self._counts["rejected_plans"] += len(teammates) - len(usable)
         return usable
 
     def _obstacles(self, obstacles: Sequence[Obstacle]) -> ObstacleSet:
-        """Obstacles as arrays, rebuilt only when the obstacle objects change (they are immutable)."""
+        """Obstacles as arrays, rebuilt only when the (immutable) obstacle objects change."""
         key = tuple(id(o) for o in obstacles)
         if key != self._obstacle_key:
             self._obstacle_key = key
-            self._obstacle_refs = tuple(obstacles)
+            self._obstacle_refs = tuple(obstacles)  # keeps the ids in the key valid
             self._obstacle_set = ObstacleSet.from_obstacles(obstacles)
             self._obstacle_dropped = len(obstacles) - self._obstacle_set.count
         self._counts["rejected_obstacles"] += self._obstacle_dropped
@@ -264,49 +263,70 @@ class FormationController:
         cov = np.asarray(own.position_cov_m2, dtype=float)
         return covariance_radius_m(cov) if _finite(cov) else 0.0
 
-    def _inputs(self, now_s: float, start_p: np.ndarray, person_p: np.ndarray, person_v: np.ndarray,
-                mates: TeammatePaths, obstacle_set: ObstacleSet, team_size: int, formation: FormationParams,
-                in_formation: bool) -> np.ndarray:
-        """(N+1, 3) clamped external inputs on the previous plan (moved to start at start_p)."""
+    def _inputs(self, tick: _Tick, mates: TeammatePaths, obstacle_set: ObstacleSet,
+                formation: FormationParams) -> np.ndarray:
+        """(N+1, 3) clamped external inputs on the previous plan, moved to begin at the start state."""
         prm = self._params
         dt = self._mpc_params.dt_s
-        n = np.arange(self._steps)[:, None]
         if self._prev_plan is not None:
-            own_path = plan_path(self._prev_plan, now_s=now_s, dt_s=dt, steps=self._steps)
-            own_path = own_path + (start_p - own_path[0])
+            own_path = plan_path(self._prev_plan, now_s=tick.now_s, dt_s=dt, steps=self._steps)
+            own_path = own_path + (tick.start_p - own_path[0])
         else:
-            own_path = np.repeat(start_p[None, :], self._steps, axis=0)
-        person_path = person_p + person_v * dt * n if prm.reference.predict_person else person_p
-        ext = external_inputs(own_positions_m=own_path, person_position_m=person_path, teammates=mates,
-                              obstacles=obstacle_set, team_size=team_size,
-                              d_des_m=formation.d_des_m, params=prm.fields, terms=self._terms, own_id=self._id,
-                              in_formation=in_formation)
+            own_path = np.repeat(tick.start_p[None, :], self._steps, axis=0)
+        person_p = np.asarray(tick.person.position_m, dtype=float)
+        if prm.reference.predict_person:
+            person_v = np.asarray(tick.person.velocity_mps, dtype=float)
+            person_p = person_p + person_v * (dt * np.arange(self._steps)[:, None])
+        ext = external_inputs(own_positions_m=own_path, person_position_m=person_p, teammates=mates,
+                              obstacles=obstacle_set, team_size=1 + int(np.count_nonzero(mates.in_formation)),
+                              d_des_m=formation.d_des_m, params=prm.fields, terms=self._terms,
+                              own_id=self._id, in_formation=tick.in_formation)
         if ext.fault:
             self._counts["field_faults"] += 1
         return ext.total
 
-    def _plan(self, now_s: float, own: VehicleState, positions: np.ndarray, velocities: np.ndarray,
-              in_formation: bool) -> HorizonPlan:
-        cov = np.asarray(own.position_cov_m2, dtype=float)
-        return HorizonPlan(vehicle_id=self._id, stamp_s=float(now_s) if np.isfinite(now_s) else 0.0,
-                           dt_s=self._mpc_params.dt_s, positions_m=positions, velocities_mps=velocities,
-                           in_formation=in_formation, position_cov_m2=cov if _finite(cov) else np.eye(3) * 0.25)
+    def _target(self, tick: _Tick, f_total: np.ndarray, formation: FormationParams,
+                preferred_bearing_rad: float | None, price: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Terminal position and velocity reference, moved by the inputs' displacement, inside the arena.
+
+        `price` aims at the d_des point with zero terminal velocity and no prediction (Price et al.).
+        """
+        mp = self._mpc_params
+        ref = self._params.reference
+        person_p = np.asarray(tick.person.position_m, dtype=float)
+        person_v = np.zeros(3) if price else np.asarray(tick.person.velocity_mps, dtype=float)
+        target, target_v = terminal_reference(position_m=tick.start_p, person_position_m=person_p,
+                                              person_velocity_mps=person_v, d_des_m=formation.d_des_m,
+                                              h_des_m=formation.h_des_m, horizon_s=self._steps * mp.dt_s,
+                                              params=ref, preferred_bearing_rad=preferred_bearing_rad)
+        if ref.pass_through and not price:
+            shift_p, shift_v = input_displacement(f_total, dt_s=mp.dt_s)
+            target, target_v = target + shift_p, target_v + shift_v
+        return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), target_v
+
+    def _plan(self, tick: _Tick, positions: np.ndarray, velocities: np.ndarray) -> HorizonPlan:
+        cov = np.asarray(tick.own.position_cov_m2, dtype=float)
+        stamp = float(tick.now_s) if np.isfinite(tick.now_s) else 0.0
+        return HorizonPlan(vehicle_id=self._id, stamp_s=stamp, dt_s=self._mpc_params.dt_s,
+                           positions_m=positions, velocities_mps=velocities, in_formation=tick.in_formation,
+                           position_cov_m2=cov if _finite(cov) else DEFAULT_COV_M2)
 
     def _waypoint(self, plan: HorizonPlan) -> tuple[np.ndarray, np.ndarray]:
         k = min(self._params.reference.waypoint_step, len(plan.positions_m) - 1)
         return np.array(plan.positions_m[k]), np.array(plan.velocities_mps[k])
 
-    def _brake(self, now_s: float, own: VehicleState, start_p: np.ndarray, start_v: np.ndarray,
-               person: PersonEstimate | None, in_formation: bool, status: SolveStatus, fault: str,
-               iterations: int = 0, solve_time_s: float = 0.0) -> ControlOutput:
+    def _brake(self, tick: _Tick, status: SolveStatus, fault: str, iterations: int = 0,
+               solve_time_s: float = 0.0) -> ControlOutput:
         """A braking plan from the start state: the fallback of every tick that cannot be solved."""
-        positions, velocities = braking_plan(position_m=start_p, velocity_mps=start_v, params=self._mpc_params)
-        plan = self._plan(now_s, own, positions, velocities, in_formation)
+        positions, velocities = braking_plan(position_m=tick.start_p, velocity_mps=tick.start_v,
+                                             params=self._mpc_params)
+        plan = self._plan(tick, positions, velocities)
         wp_p, wp_v = self._waypoint(plan)
+        person = tick.person
         if person is not None and _finite(person.position_m):
             yaw = bearing_rad(from_m=wp_p, to_m=np.asarray(person.position_m, dtype=float))
         else:
-            yaw = float(own.yaw_rad) if np.isfinite(own.yaw_rad) else 0.0
+            yaw = float(tick.own.yaw_rad) if np.isfinite(tick.own.yaw_rad) else 0.0
         self._prev_plan = plan
         self._counts["no_person" if status == SolveStatus.NO_PERSON else "braking"] += 1
         return ControlOutput(plan=plan, waypoint_position_m=wp_p, waypoint_velocity_mps=wp_v, yaw_rad=yaw,

@@ -1,26 +1,29 @@
 """Where the MPC starts, where it aims, and which of its states becomes the way-point.
 
 The paper's terminal reference (eq. `cost`): the point at horizontal distance d_des from the person along the
-person->MAV bearing, h_des above the person, with the person's velocity (vertical 0). Three choices here were made
-by measurement in closed loop (tests/controller/test_closed_loop.py, prototype numbers in the comments):
+person->MAV bearing, h_des above the person, with the person's velocity (vertical 0). Three choices here were
+made by measurement in closed loop (tests/controller/test_closed_loop.py, prototype numbers in the comments):
 
 1. Pass-through of the external inputs. With the paper's weights the MPC cancels most of any external input:
-   for a constant tangential f it applies u(0) = -0.92 f (the "creep" of METHOD.md Pitfall 5, 0.16 m/s round the
-   circle), and it even counters inputs predicted late in the horizon by accelerating towards their source now,
-   a negative damping that made squeezed MAVs oscillate into each other (0.02 m at K = 8..16). Lowering the
-   tangential weights trades this for an undamped formation (MAVs at 5 m/s rear-ending each other). Instead, the
-   terminal reference is moved by the displacement and velocity that the inputs f(0..N) alone add over the
-   horizon (`input_displacement`): the MPC then plans exactly as without inputs (the system is linear) and the
-   inputs act on top as free accelerations, while the paper's full weights keep every direction well damped
-   (velocity time constant about 1 s). Every input keeps its role in the plan that teammates see.
+   for a constant tangential f it applies u(0) = -0.92 f (the "creep" of METHOD.md Pitfall 5, 0.16 m/s round
+   the circle), and it even counters inputs predicted late in the horizon by accelerating towards their source
+   now, a negative damping that made squeezed MAVs oscillate into each other (0.02 m at K = 8..16). Lowering
+   the tangential weights trades this for an undamped formation (MAVs at 5 m/s rear-ending each other).
+   Instead, the terminal reference is moved by the displacement and velocity that the inputs f(0..N) alone add
+   over the horizon (`input_displacement`): the MPC then plans exactly as without inputs (the system is
+   linear) and the inputs act on top as free accelerations, while the paper's full weights keep every
+   direction well damped (velocity time constant about 1 s). Every input keeps its role in the plan that
+   teammates see.
 2. Planning from the reference state. An MPC re-planned from the measured state while a PX4-like cascade
-   (position P 0.95, velocity P 1.8, attitude lag 0.15 s) follows way-point x(1) realises only about 20 % of the
-   planned acceleration: a lone MAV took 30 s to settle and the team never converged. So the plan starts from the
-   previous plan's state at `now` (the way-point the autopilot is tracking) as long as the measured state is
-   within the leash (`leash_position_m`, `leash_velocity_mps`); beyond it the start is pulled back onto the leash
-   towards the measurement. The guarantee (eq. 17) already budgets this tracking error as e_max.
+   (position P 0.95, velocity P 1.8, attitude lag 0.15 s) follows way-point x(1) realises only about 20 % of
+   the
+   planned acceleration: a lone MAV took 30 s to settle and the team never converged. So the plan starts from
+   the previous plan's state at `now` (the way-point the autopilot is tracking) as long as the measured state
+   is within the leash (`leash_position_m`, `leash_velocity_mps`); beyond it the start is pulled back onto the
+   leash towards the measurement. The guarantee (eq. 17) already budgets this tracking error as e_max.
 3. Way-point: the plan's state `waypoint_step` steps ahead. Step 1 (0.1 s) is stable with the cascade above;
-   steps 2 and more put the position set-point ahead of the vehicle by v * k * dt, which the cascade's position
+   steps 2 and more put the position set-point ahead of the vehicle by v * k * dt, which the cascade's
+   position
    gain turns into positive velocity feedback: the prototype diverged to thousands of metres.
 
 All functions are pure; arrays are ENU, metres, seconds.
@@ -41,8 +44,9 @@ class ReferenceParams:
     leash_position_m, leash_velocity_mps: how far the measured state may be from the previous plan's state at
         `now` before the plan is re-anchored towards the measurement (0 = always plan from the measurement).
     pass_through: move the terminal reference by what the external inputs add over the horizon (see 1. above).
-    predict_person: aim at the person's constant-velocity prediction at the horizon end (N+1) dt ahead instead of
-        the current estimate; with a person walking at 1 m/s the MAVs otherwise trail the desired circle by about
+    predict_person: aim at the person's constant-velocity prediction at the horizon end (N+1) dt ahead instead
+        of the current estimate; with a person walking at 1 m/s the MAVs otherwise trail the desired circle by
+        about
         1.6 m (prototype: distance error 1.65 m max vs 0.28 m).
     """
 
@@ -104,14 +108,16 @@ def bearing_rad(*, from_m: np.ndarray, to_m: np.ndarray) -> float:
     return float(np.arctan2(dy, dx))
 
 
-def terminal_reference(*, position_m: np.ndarray, person_position_m: np.ndarray, person_velocity_mps: np.ndarray,
-                       d_des_m: float, h_des_m: float, horizon_s: float, params: ReferenceParams,
+def terminal_reference(*, position_m: np.ndarray, person_position_m: np.ndarray,
+                       person_velocity_mps: np.ndarray, d_des_m: float, h_des_m: float, horizon_s: float,
+                       params: ReferenceParams,
                        preferred_bearing_rad: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The paper's terminal reference (eq. `cost`): (3,) position and (3,) velocity.
 
-    The bearing is that of the MAV's start position seen from the person's *current* position (or the preferred
-    bearing when given); the point lies d_des from the person's position at the horizon end (predicted with
-    constant velocity when params.predict_person) and h_des above it; the velocity is the person's, vertical 0.
+    The bearing is that of the MAV's start position seen from the person's *current* position (or the
+    preferred bearing when given); the point lies d_des from the person's position at the horizon end
+    (predicted with constant velocity when params.predict_person) and h_des above it; the velocity is the
+    person's, vertical 0.
     """
     bearing = (bearing_rad(from_m=person_position_m, to_m=position_m) if preferred_bearing_rad is None
                else float(preferred_bearing_rad))
@@ -124,8 +130,8 @@ def terminal_reference(*, position_m: np.ndarray, person_position_m: np.ndarray,
 def input_displacement(external_inputs_mps2: np.ndarray, *, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     """(3,) position and (3,) velocity that inputs f(0..N) (N+1, 3) alone add to x(N+1) from rest.
 
-    Each step is x(n+1) = A x(n) + B f(n), so f(n) moves the final position by dt^2 (N - n + 1/2) and the final
-    velocity by dt.
+    Each step is x(n+1) = A x(n) + B f(n), so f(n) moves the final position by dt^2 (N - n + 1/2) and the
+    final velocity by dt.
     """
     n_steps = external_inputs_mps2.shape[0]
     weights = dt_s * dt_s * (n_steps - 1 - np.arange(n_steps) + 0.5)
@@ -134,4 +140,4 @@ def input_displacement(external_inputs_mps2: np.ndarray, *, dt_s: float) -> tupl
 
 def clip_into(position_m: np.ndarray, *, lower_m, upper_m) -> np.ndarray:
     """(3,) position clipped into the box [lower_m, upper_m]."""
-    return np.minimum(np.maximum(position_m, np.asarray(lower_m, dtype=float)), np.asarray(upper_m, dtype=float))
+    return np.clip(position_m, np.asarray(lower_m, dtype=float), np.asarray(upper_m, dtype=float))
