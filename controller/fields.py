@@ -21,6 +21,7 @@ from controller.messages import HorizonPlan, Obstacle
 
 HALF_PI = 0.5 * np.pi
 TWO_PI = 2.0 * np.pi
+SANE_ABS = 1.0e6  # coordinates (m) or covariances (m^2) beyond this are garbage, not a place or a spread
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,8 @@ class FieldParams:
         teammate_age_grace_s). With the default 0.25 m^2 covariances a fresh d_max is 3.0 m, below the 3.12 m
         chord of 16 MAVs on an 8 m circle, so a finished formation feels no repulsion.
     teammate_speed_mps: |v_max| of eq. 17, growing d_max with the plan's age.
+    covariance_radius_cap_m: largest covariance radius eq. 17 adds per MAV, so that a teammate reporting an
+        absurd covariance is avoided widely but does not repel us from the whole arena.
     teammate_age_grace_s: plans are aligned to our clock by their stamp, so only age beyond one publish period
         is uncertain.
     teammate_peak_mps2, obstacle_peak_mps2, person_peak_mps2: the repulsion fields' value at (and below)
@@ -102,6 +105,7 @@ class FieldParams:
     teammate_speed_mps: float = 5.0
     teammate_age_grace_s: float = 0.1
     teammate_peak_mps2: float = 8.0
+    covariance_radius_cap_m: float = 5.0
     obstacle_d_min_m: float = 1.5
     obstacle_d_max_m: float = 3.0
     obstacle_peak_mps2: float = 8.0
@@ -167,16 +171,19 @@ class TeammatePaths:
     positions_m: (J, N+1, 3) teammate j's planned position at our step n; vehicle_ids: (J,) int, used only to
     break exact ties; in_formation: (J,) bool, only these count for K and the angular term (all are avoided);
     d_max_m: (J,) the teammate-repulsion d_max of eq. 17 for each (covariance radii and message age included).
+    rejected: plans dropped for non-finite or absurd numbers while building this.
     """
 
     positions_m: np.ndarray
     vehicle_ids: np.ndarray
     in_formation: np.ndarray
     d_max_m: np.ndarray
+    rejected: int = 0
 
     @classmethod
-    def empty(cls, steps: int) -> TeammatePaths:
-        return cls(np.zeros((0, steps, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool), np.zeros(0))
+    def empty(cls, steps: int, *, rejected: int = 0) -> TeammatePaths:
+        return cls(np.zeros((0, steps, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool), np.zeros(0),
+                   rejected)
 
     @property
     def count(self) -> int:
@@ -245,9 +252,11 @@ def cotangential_magnitude(d, *, d_min, d_max, gain, freeze_fraction: float = 0.
         raise ValueError("cotangential_magnitude needs d_min < d_max")
     z0 = HALF_PI * freeze_fraction
     frac = np.clip((d_arr - lo) / span, 0.0, 1.0)
-    z = z0 + (HALF_PI - z0) * frac
-    out = (np.asarray(gain, dtype=float) * HALF_PI) / span * (1.0 / np.tan(z) + z - HALF_PI)
-    out = np.where(frac >= 1.0, 0.0, np.maximum(out, 0.0))
+    # w = pi/2 - z; cot z + z - pi/2 = tan w - w, summed as a series near d_max where it would cancel.
+    w = (HALF_PI - z0) * (1.0 - frac)
+    w2 = w * w
+    shape = np.where(w < 0.05, w * w2 * (1.0 / 3.0 + w2 * (2.0 / 15.0 + w2 * 17.0 / 315.0)), np.tan(w) - w)
+    out = (np.asarray(gain, dtype=float) * HALF_PI) / span * shape
     return float(out) if out.ndim == 0 else out
 
 
@@ -289,9 +298,14 @@ def _aligned(positions: np.ndarray, stamps: np.ndarray, plan_dts: np.ndarray, *,
     return (1.0 - a) * positions[rows, lo] + a * positions[rows, hi]
 
 
-def covariance_radius_m(cov_m2: np.ndarray) -> float:
-    """Radius of a position covariance for eq. 17: the square root of its largest eigenvalue (m)."""
-    return float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(cov_m2, dtype=float))[-1], 0.0)))
+def covariance_radius_m(cov_m2: np.ndarray) -> float | np.ndarray:
+    """Radius of a position covariance for eq. 17: the square root of its largest eigenvalue (m).
+
+    cov_m2: (3, 3), or (J, 3, 3) for J radii at once.
+    """
+    largest = np.linalg.eigvalsh(np.asarray(cov_m2, dtype=float))[..., -1]
+    radius = np.sqrt(np.maximum(largest, 0.0))
+    return float(radius) if radius.ndim == 0 else radius
 
 
 def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, steps: int,
@@ -299,30 +313,47 @@ def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, s
                    current_position_only: bool = False) -> TeammatePaths:
     """Align every teammate's latest plan to our horizon and compute its eq. 17 d_max.
 
-    d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace): the
-    guarantee's r_sigma_k + r_sigma_j + r_comm on top of a fixed base. current_position_only (the `price`
-    baseline, which shares no plans) holds each plan's x(0) over the horizon. Plans must be finite (the
-    formation controller rejects and counts the others first).
+    d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace)
+    (each r_sigma capped at covariance_radius_cap_m): the guarantee's r_sigma_k + r_sigma_j + r_comm on top of
+    a fixed base. current_position_only (the `price` baseline, which shares no plans) holds each plan's x(0)
+    over the horizon. Plans must have finite stamps and positive steps; a plan with a non-finite (or beyond
+    1000 km) position or covariance is dropped and counted in `rejected`.
     """
     if not plans:
         return TeammatePaths.empty(steps)
+    if len({len(p.positions_m) for p in plans}) == 1:
+        stacked = np.stack([p.positions_m for p in plans])
+    else:
+        stacked = None
+    covs = np.stack([p.position_cov_m2 for p in plans])
+    if stacked is not None:
+        worst = np.maximum(np.abs(stacked).max(axis=(1, 2)), np.abs(covs).max(axis=(1, 2)))
+    else:
+        worst = np.array([max(np.abs(p.positions_m).max(), np.abs(p.position_cov_m2).max()) for p in plans])
+    sane = worst < SANE_ABS
+    rejected = len(plans) - int(np.count_nonzero(sane))
+    if rejected:
+        plans = [p for p, ok in zip(plans, sane, strict=True) if ok]
+        stacked = stacked[sane] if stacked is not None else None
+        covs = covs[sane]
+        if not plans:
+            return TeammatePaths.empty(steps, rejected=rejected)
     stamps = np.array([p.stamp_s for p in plans])
     if current_position_only:
         paths = np.repeat(np.array([p.positions_m[0] for p in plans])[:, None, :], steps, axis=1)
+    elif stacked is not None:
+        plan_dts = np.array([p.dt_s for p in plans])
+        paths = _aligned(stacked, stamps, plan_dts, now_s=now_s, dt_s=dt_s, steps=steps)
     else:
-        lengths = {len(p.positions_m) for p in plans}
-        if len(lengths) == 1:
-            plan_dts = np.array([p.dt_s for p in plans])
-            stacked = np.stack([p.positions_m for p in plans])
-            paths = _aligned(stacked, stamps, plan_dts, now_s=now_s, dt_s=dt_s, steps=steps)
-        else:
-            paths = np.stack([plan_path(p, now_s=now_s, dt_s=dt_s, steps=steps) for p in plans])
-    radii = np.array([covariance_radius_m(p.position_cov_m2) for p in plans])
+        paths = np.stack([plan_path(p, now_s=now_s, dt_s=dt_s, steps=steps) for p in plans])
+    cap = params.covariance_radius_cap_m
+    radii = np.minimum(covariance_radius_m(covs), cap)
     age = np.maximum(now_s - stamps - params.teammate_age_grace_s, 0.0)
-    d_max = params.teammate_d_max_base_m + own_cov_radius_m + radii + params.teammate_speed_mps * age
+    d_max = (params.teammate_d_max_base_m + min(own_cov_radius_m, cap) + radii
+             + params.teammate_speed_mps * age)
     ids = np.array([p.vehicle_id for p in plans], dtype=int)
     in_formation = np.array([p.in_formation for p in plans], dtype=bool)
-    return TeammatePaths(paths, ids, in_formation, d_max)
+    return TeammatePaths(paths, ids, in_formation, d_max, rejected)
 
 
 # --------------------------------------------------------------------------------------------- the terms

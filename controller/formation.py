@@ -10,13 +10,15 @@ Methods (METHOD.md "Baselines"): `active` (every input), `dqmpc` (teammate and o
 its thresholds 1 m / 4 m), `price` (MPC to the d_des circle point with zero terminal velocity, weights
 1000 / 0.1, no inputs in the MPC, a field added after it, teammates' current positions only; baselines.py).
 
-Bad input never raises and never yields a NaN way-point: a non-finite own state, person estimate, time or
-operator parameter gives a braking plan (SolveStatus.BRAKING, the reason in `fault`); a non-finite teammate
-plan or obstacle is dropped and counted; no person estimate gives a braking plan to rest (NO_PERSON).
+Bad input never raises and never yields a NaN way-point: a non-finite (or absurdly large) own state, person
+estimate, time or operator parameter gives a braking plan (SolveStatus.BRAKING, the reason in `fault`); such
+a teammate plan or obstacle is dropped and counted; no person estimate gives a braking plan to rest
+(NO_PERSON).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -24,6 +26,7 @@ import numpy as np
 
 from controller.baselines import price_field
 from controller.fields import (
+    SANE_ABS,
     FieldTerms,
     ObstacleSet,
     TeammatePaths,
@@ -91,6 +94,11 @@ def _finite(*arrays) -> bool:
     return all(bool(np.all(np.isfinite(a))) for a in arrays)
 
 
+def _sane(*arrays) -> bool:
+    """Finite and within SANE_ABS (a NaN fails the comparison)."""
+    return all(float(np.abs(a).max()) < SANE_ABS for a in arrays)
+
+
 class FormationController:
     """The formation controller of MAV `vehicle_id`, one per MAV. It keeps the MPC's warm start, its own
     previous plan (the reference it is being flown along) and counters; nothing else."""
@@ -112,6 +120,8 @@ class FormationController:
         self._obstacle_refs: tuple[Obstacle, ...] = ()
         self._obstacle_set = ObstacleSet.from_obstacles(())
         self._obstacle_dropped = 0
+        self._cov_key: bytes | None = None
+        self._cov_radius = 0.0
         self.reset()
 
     @property
@@ -162,9 +172,7 @@ class FormationController:
         mp = self._mpc_params
         price = self._method == Method.PRICE
         obstacle_set = self._obstacles(obstacles)
-        mates = teammate_paths(self._usable_plans(teammates), now_s=now_s, dt_s=mp.dt_s, steps=self._steps,
-                               own_cov_radius_m=self._own_cov_radius(own), params=self._params.fields,
-                               current_position_only=price)
+        mates = self._teammates(teammates, now_s, own)
         if price:
             f_total = np.zeros((self._steps, 3))
         else:
@@ -204,13 +212,13 @@ class FormationController:
         """Why this tick cannot be planned, or None."""
         if not np.isfinite(now_s):
             return "the time is not finite"
-        if not _finite(own.position_m, own.velocity_mps):
-            return "own state is not finite"
+        if not _sane(own.position_m, own.velocity_mps):
+            return "own state is not finite (or beyond 1000 km)"
         d_des, h_des = formation.d_des_m, formation.h_des_m
         if not (np.isfinite(d_des) and d_des > 0.0 and np.isfinite(h_des)):
             return f"invalid formation parameters d_des={d_des} h_des={h_des}"
-        if person is not None and not _finite(person.position_m, person.velocity_mps):
-            return "person estimate is not finite"
+        if person is not None and not _sane(person.position_m, person.velocity_mps):
+            return "person estimate is not finite (or beyond 1000 km)"
         return None
 
     def _reference_state(self, now_s: float) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
@@ -228,7 +236,7 @@ class FormationController:
         ref_p, ref_v = self._reference_state(now_s)
         pos = np.asarray(own.position_m, dtype=float)
         vel = np.asarray(own.velocity_mps, dtype=float)
-        if _finite(pos, vel):
+        if _sane(pos, vel):
             self._last_position = pos.copy()
             return initial_state(measured_position_m=pos, measured_velocity_mps=vel,
                                  reference_position_m=ref_p, reference_velocity_mps=ref_v,
@@ -240,13 +248,17 @@ class FormationController:
             return self._last_position.copy(), np.zeros(3)
         return clip_into(np.zeros(3), lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
 
-    def _usable_plans(self, teammates: Sequence[HorizonPlan]) -> list[HorizonPlan]:
-        """Teammate plans with finite numbers, a positive step and another MAV's id; the rest are counted."""
+    def _teammates(self, teammates: Sequence[HorizonPlan], now_s: float, own: VehicleState) -> TeammatePaths:
+        """Teammates' plans on our horizon. Plans carrying our id, a non-finite stamp or step, or non-finite
+        numbers are dropped and counted."""
         usable = [p for p in teammates
-                  if p.vehicle_id != self._id and np.isfinite(p.stamp_s) and np.isfinite(p.dt_s)
-                  and p.dt_s > 0.0 and _finite(p.positions_m, p.position_cov_m2)]
-        self._counts["rejected_plans"] += len(teammates) - len(usable)
-        return usable
+                  if p.vehicle_id != self._id and math.isfinite(p.stamp_s) and p.dt_s > 0.0
+                  and math.isfinite(p.dt_s)]
+        mates = teammate_paths(usable, now_s=now_s, dt_s=self._mpc_params.dt_s, steps=self._steps,
+                               own_cov_radius_m=self._own_cov_radius(own), params=self._params.fields,
+                               current_position_only=self._method == Method.PRICE)
+        self._counts["rejected_plans"] += len(teammates) - len(usable) + mates.rejected
+        return mates
 
     def _obstacles(self, obstacles: Sequence[Obstacle]) -> ObstacleSet:
         """Obstacles as arrays, rebuilt only when the (immutable) obstacle objects change."""
@@ -260,8 +272,12 @@ class FormationController:
         return self._obstacle_set
 
     def _own_cov_radius(self, own: VehicleState) -> float:
-        cov = np.asarray(own.position_cov_m2, dtype=float)
-        return covariance_radius_m(cov) if _finite(cov) else 0.0
+        """Eq. 17's r_sigma of our own covariance (cached: it rarely changes)."""
+        key = own.position_cov_m2.tobytes()
+        if key != self._cov_key:
+            cov = np.asarray(own.position_cov_m2, dtype=float)
+            self._cov_key, self._cov_radius = key, (covariance_radius_m(cov) if _finite(cov) else 0.0)
+        return self._cov_radius
 
     def _inputs(self, tick: _Tick, mates: TeammatePaths, obstacle_set: ObstacleSet,
                 formation: FormationParams) -> np.ndarray:

@@ -68,7 +68,7 @@ class ReferenceParams:
 def leashed(measured: np.ndarray, reference: np.ndarray, leash: float) -> np.ndarray:
     """The reference if it lies within `leash` of the measurement, else the point on the leash towards it."""
     gap = reference - measured
-    dist = float(np.sqrt(gap @ gap))
+    dist = float(np.linalg.norm(gap))
     if dist <= leash:
         return reference.copy()
     return measured + gap * (leash / dist)

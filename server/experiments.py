@@ -119,12 +119,17 @@ class ProfileOverrides:
 # ---- the paper's protocol (METHOD.md "Experiments in the paper") -------------------------------------------
 
 PAPER_METHODS: tuple[tuple[str, str, str], ...] = (
-    # (label, method, obstacle setting): SE4 avoids the paper's 13 trees as virtual obstacles.
+    # (label, method, virtual obstacles): SE4 avoids the paper's 13 tree positions as virtual obstacles
+    # (avoided, not seen by the cameras); no trunks anywhere in this family.
     ("SE1 price", "price", "none"),
     ("SE2 dqmpc", "dqmpc", "none"),
     ("SE3 active", "active", "none"),
-    ("SE4 active + obstacles", "active", "paper"),
+    ("SE4 active + virtual obstacles", "active", "paper"),
 )
+# The methods family starts every team side by side (the simulator's "cluster" start), so each method has to
+# build its own formation. From the "ring" start the baselines would be handed the evenly spaced formation
+# that only the active method creates, and the comparison would not test formation control at all.
+METHODS_START = "cluster"
 PAPER_VEHICLES_METHODS = 5
 PAPER_VEHICLE_COUNTS: tuple[int, ...] = tuple(range(3, 17))
 PAPER_LOSS_PERCENT: tuple[int, ...] = (0, 10, 25, 50, 75, 90, 100)
@@ -151,11 +156,13 @@ def _methods_conditions() -> tuple[Condition, ...]:
             settings=(
                 ("vehicles", PAPER_VEHICLES_METHODS),
                 ("method", method),
-                ("trees", trees),
+                ("trees", "none"),
+                ("virtual_obstacles", virtual),
                 ("person", "paper"),
+                ("start", METHODS_START),
             ),
         )
-        for i, (label, method, trees) in enumerate(PAPER_METHODS)
+        for i, (label, method, virtual) in enumerate(PAPER_METHODS)
     )
 
 

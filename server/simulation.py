@@ -35,7 +35,8 @@ class SimConfig:
     paper, random or still; warmup_s: metrics start after this (0 <= warmup_s < duration_s; the default
     covers takeoff, about 7 s, and settling); rate_hz: control rate (the paper: 100 Hz); d_des_m, h_des_m:
     the operator's formation; start: ring or cluster (see vehicles.scenario.Scenario); latency_s: link
-    latency; gps_drift: simulate self-localisation drift.
+    latency; gps_drift: simulate self-localisation drift; virtual_obstacles: none or paper (the paper's 13
+    tree positions as virtual obstacles: avoided, not seen by the cameras; the paper's SE4).
     """
 
     vehicles: int = 3
@@ -52,6 +53,7 @@ class SimConfig:
     start: str = "ring"
     latency_s: float = 0.03
     gps_drift: bool = True
+    virtual_obstacles: str = "none"
 
     def __post_init__(self) -> None:
         vehicles = self.vehicles
@@ -87,7 +89,7 @@ class SimConfig:
         """The world and team this config flies."""
         return Scenario(vehicles=self.vehicles, seed=self.seed, method=Method(self.method), trees=self.trees,
                         person=self.person, comm_loss=float(self.comm_loss), latency_s=self.latency_s,
-                        start=self.start, gps_drift=self.gps_drift,
+                        start=self.start, gps_drift=self.gps_drift, virtual_obstacles=self.virtual_obstacles,
                         formation=FormationParams(d_des_m=self.d_des_m, h_des_m=self.h_des_m))
 
     def to_dict(self) -> dict[str, Any]:

@@ -6,9 +6,17 @@ return the set-point (position, velocity, yaw) plus the messages to broadcast (i
 its detections at once). No clocks, no I/O: the deterministic simulation and the live ground station drive the
 same `tick(now_s, inputs) -> outputs`.
 
-Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`. When the MAV knows fewer
-in-formation teammates than the roster says it has, it asks the controller for its roster slot bearing
-(`slot_bearing_rad`) as the terminal reference, so a team that cannot talk still spreads out.
+Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`. The roster (from the ground
+station: every in-formation MAV with its slot bearing 2 pi k / K about the person) stands in for what the
+link no longer carries. For every unheard teammate the agent passes the controller a *phantom* plan at that
+teammate's slot (about this MAV's own person estimate, moving with the person), and it asks the controller for
+its own slot bearing as the terminal reference. So a team that cannot talk still spreads out, and a MAV pushed
+out of its slot by a trunk is pushed back by its neighbours' phantoms before it reaches them: without any
+message, the slots are all a MAV can know about where its teammates are.
+
+Lost person: with no estimate at all (the track expired, e.g. behind a trunk with no teammate to fill in),
+the controller holds the MAV where it is; the agent then turns it slowly on the spot (`search_yaw_rate_radps`)
+so that its camera sweeps the surroundings and finds the person again, instead of staring at the trunk.
 """
 
 from __future__ import annotations
@@ -18,8 +26,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
-from controller.formation import FormationController
 
+from controller.formation import FormationController
 from controller.messages import (
     ControlOutput,
     Detection,
@@ -47,10 +55,13 @@ class AgentRole(StrEnum):
 @dataclass(frozen=True)
 class AgentParams:
     """plan_period_s: how often the plan is broadcast (10 Hz); teammate_timeout_s: a teammate's plan older
-    than this is forgotten (it is then neither avoided nor spaced around)."""
+    than this is forgotten (it is then neither avoided nor spaced around); search_yaw_rate_radps: how fast a
+    MAV that lost the person turns on the spot to look for it (0.5 rad/s: a full turn in 12.6 s, slow enough
+    for the 4 Hz detector to see the person in several frames of each turn)."""
 
     plan_period_s: float = 0.1
     teammate_timeout_s: float = 3.0
+    search_yaw_rate_radps: float = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,9 +70,9 @@ class AgentInputs:
 
     own: the autopilot's latest state (None before the first telemetry); detections: the MAV's own camera
     detections since the last tick; received: teammates' messages delivered since the last tick; obstacles:
-    static and virtual; formation: the operator's d_des/h_des; role: see AgentRole; slot_bearing_rad: the ENU
-    bearing of this MAV's roster slot about the person (2 pi k / K), used when teammates are unheard;
-    slot_count: K, the number of MAVs the roster has in formation.
+    static and virtual; formation: the operator's d_des/h_des; role: see AgentRole; roster: (vehicle id, slot
+    bearing) of every MAV in formation, this one included, the bearing (ENU, about the person) being
+    offset + 2 pi k / K; used for teammates that are unheard.
     """
 
     own: AutopilotState | None
@@ -70,8 +81,7 @@ class AgentInputs:
     obstacles: tuple[Obstacle, ...] = ()
     formation: FormationParams = field(default_factory=FormationParams)
     role: AgentRole = AgentRole.FORMATION
-    slot_bearing_rad: float | None = None
-    slot_count: int = 1
+    roster: tuple[tuple[int, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -129,6 +139,7 @@ class Agent:
         self._controller = FormationController(vehicle_id=self.vehicle_id, params=params)
         self._plans: dict[int, HorizonPlan] = {}
         self._last_publish_s = -math.inf
+        self._search: tuple[float, float] | None = None  # (time, yaw command) while searching
         self._counts = dict.fromkeys(AgentCounters.__dataclass_fields__, 0)
 
     @property
@@ -159,7 +170,10 @@ class Agent:
         fault = None
         used_slot = False
         if own is not None and inputs.role == AgentRole.FORMATION:
-            used_slot = inputs.slot_bearing_rad is not None and known < inputs.slot_count - 1
+            slot = dict(inputs.roster).get(self.vehicle_id)
+            used_slot = slot is not None and known < len(inputs.roster) - 1
+            if used_slot and person is not None:
+                teammates = teammates + self._phantoms(now_s, person, inputs, teammates)
             try:
                 control = self._controller.step(
                     now_s=now_s,
@@ -168,9 +182,14 @@ class Agent:
                                      position_cov_m2=own.position_cov_m2),
                     person=person, teammates=teammates, obstacles=inputs.obstacles,
                     formation=inputs.formation, in_formation=True,
-                    preferred_bearing_rad=inputs.slot_bearing_rad if used_slot else None)
+                    preferred_bearing_rad=slot if used_slot else None)
+                yaw = control.yaw_rad
+                if control.status == SolveStatus.NO_PERSON:
+                    yaw = self._search_yaw(now_s, own.yaw_rad)
+                else:
+                    self._search = None
                 setpoint = Setpoint(stamp_s=now_s, position_m=control.waypoint_position_m,
-                                    velocity_mps=control.waypoint_velocity_mps, yaw_rad=control.yaw_rad)
+                                    velocity_mps=control.waypoint_velocity_mps, yaw_rad=yaw)
                 plan = control.plan
                 if control.status == SolveStatus.BRAKING:
                     counts["braking_ticks"] += 1
@@ -195,6 +214,32 @@ class Agent:
                             outbox=tuple(outbox), tracker=self._tracker.stats(),
                             counters=AgentCounters(**counts), teammates_known=known, used_slot=used_slot,
                             fault=fault)
+
+    def _phantoms(self, now_s: float, person: PersonEstimate, inputs: AgentInputs,
+                  heard: tuple[HorizonPlan, ...]) -> tuple[HorizonPlan, ...]:
+        """Plans at the roster slots of the in-formation teammates not heard from, moving with the person."""
+        heard_ids = {p.vehicle_id for p in heard if p.in_formation}
+        n = self._params.mpc.horizon_steps + 2
+        dt = self._params.mpc.dt_s
+        velocity = np.array([person.velocity_mps[0], person.velocity_mps[1], 0.0])
+        drift = np.arange(n)[:, None] * dt * velocity[None, :]
+        d, h = inputs.formation.d_des_m, inputs.formation.h_des_m
+        out = []
+        for vid, bearing in inputs.roster:
+            if vid == self.vehicle_id or vid in heard_ids:
+                continue
+            slot = person.position_m + np.array([d * math.cos(bearing), d * math.sin(bearing), h])
+            out.append(HorizonPlan(vehicle_id=vid, stamp_s=now_s, dt_s=dt, positions_m=slot[None, :] + drift,
+                                   velocities_mps=np.repeat(velocity[None, :], n, axis=0), in_formation=True))
+        return tuple(out)
+
+    def _search_yaw(self, now_s: float, yaw_rad: float) -> float:
+        """The yaw command of the search turn: advancing at search_yaw_rate_radps from where it began."""
+        if self._search is None:
+            self._search = (now_s, yaw_rad)
+        t0, yaw0 = self._search
+        self._search = (now_s, yaw0 + self._ap.search_yaw_rate_radps * (now_s - t0))
+        return (self._search[1] + math.pi) % (2.0 * math.pi) - math.pi
 
     def _receive(self, msg: object) -> None:
         counts = self._counts

@@ -260,19 +260,17 @@ class Mission:
         roster = [vid for vid, v in self._vehicles.items() if v.phase in (Phase.TAKEOFF, Phase.FORMATION)
                   and vid not in silent and not (v.state is not None and v.state.released)]
         k = len(roster)
+        offset = self._params.slot_offset_rad
+        slots = tuple((vid, offset + 2.0 * math.pi * i / k) for i, vid in enumerate(roster))
         for vid, v in self._vehicles.items():
             if vid in silent:
                 self._world.detections(vid)  # stale frames and messages are dropped, not queued up
                 self._links.receive(now_s, vid)
                 continue
             role = self._role(v)
-            slot = None
-            if vid in roster:
-                slot = self._params.slot_offset_rad + 2.0 * math.pi * roster.index(vid) / k
             inputs = AgentInputs(own=v.state, detections=self._world.detections(vid),
                                  received=self._links.receive(now_s, vid), obstacles=obstacles,
-                                 formation=self._formation, role=role, slot_bearing_rad=slot,
-                                 slot_count=max(k, 1))
+                                 formation=self._formation, role=role, roster=slots)
             t0 = self._clock() if self._clock is not None else None
             out = v.agent.tick(now_s, inputs)
             if t0 is not None:

@@ -22,10 +22,11 @@ from vehicles.links import LinkParams, SimLinks
 from vehicles.mission import Mission, MissionParams
 from vehicles.person import PERSON_MODES, PathPerson, PersonModel, RandomPerson, StillPerson, paper_path
 from vehicles.sim_autopilot import AirframeParams, SimAutopilot
-from vehicles.trees import TreeSpec, paper_trees, random_trees
+from vehicles.trees import PAPER_TREES_XY, TREE_HEIGHT_M, TREE_RADIUS_M, TreeSpec, paper_trees, random_trees
 from vehicles.world import DetectorParams, SimWorld
 
 START_LAYOUTS = ("ring", "cluster")
+VIRTUAL_OBSTACLE_LAYOUTS = ("none", "paper")
 START_CLEARANCE_M = 2.0  # a start spot keeps this much from any trunk surface
 CLUSTER_SPACING_M = 2.5  # neighbours on the launch arc of the "cluster" layout
 
@@ -37,7 +38,9 @@ class Scenario:
     vehicles: K >= 1; seed; method; trees: "paper", "none" or N random; person: paper | random | still;
     comm_loss in [0, 1]; latency_s: link latency (plus up to jitter_s); start: "ring" (on the ground at the
     roster slots, d_des from the person, as a crew would set them out) or "cluster" (side by side, 2.5 m
-    apart, south of the person: the team has to spread out); gps_drift: simulate self-localisation drift.
+    apart, south of the person: the team has to spread out); gps_drift: simulate self-localisation drift;
+    virtual_obstacles: "none" or "paper" (the paper's 13 tree positions as the operator's virtual obstacles:
+    avoided like trunks but invisible to the cameras, the paper's SE4).
     """
 
     vehicles: int = 3
@@ -52,6 +55,7 @@ class Scenario:
     formation: FormationParams = field(default_factory=FormationParams)
     gps_drift: bool = True
     physics_step_s: float = 0.01
+    virtual_obstacles: str = "none"
 
     def __post_init__(self) -> None:
         if not (isinstance(self.vehicles, int) and 1 <= self.vehicles <= 64):
@@ -64,6 +68,9 @@ class Scenario:
             raise ValueError(f"person must be one of {', '.join(PERSON_MODES)}, got {self.person!r}")
         if self.start not in START_LAYOUTS:
             raise ValueError(f"start must be one of {', '.join(START_LAYOUTS)}, got {self.start!r}")
+        if self.virtual_obstacles not in VIRTUAL_OBSTACLE_LAYOUTS:
+            raise ValueError(f"virtual_obstacles must be one of {', '.join(VIRTUAL_OBSTACLE_LAYOUTS)}, "
+                             f"got {self.virtual_obstacles!r}")
         LinkParams(loss=self.comm_loss, latency_s=self.latency_s, jitter_s=self.jitter_s)
         if not (math.isfinite(self.physics_step_s) and 0 < self.physics_step_s <= 0.05):
             raise ValueError(f"physics_step_s must be in (0, 0.05], got {self.physics_step_s}")
@@ -111,6 +118,12 @@ def start_positions(*, count: int, layout: str, d_des_m: float, person_xy_m: np.
     return np.array(out)
 
 
+def paper_virtual_obstacles() -> tuple[Obstacle, ...]:
+    """The paper's 13 tree positions as virtual obstacles (kind "virtual"), ids virtual-1..virtual-13."""
+    return tuple(Obstacle(obstacle_id=f"virtual-{i + 1}", center_m=xy, radius_m=TREE_RADIUS_M,
+                          height_m=TREE_HEIGHT_M, kind="virtual") for i, xy in enumerate(PAPER_TREES_XY))
+
+
 def _person(mode: str, rng: np.random.Generator) -> PersonModel:
     if mode == "paper":
         return PathPerson(path_xy_m=paper_path())
@@ -135,13 +148,14 @@ def build_sim(scenario: Scenario, *, controller_params: ControllerParams | None 
     person_xy = np.asarray(person.truth(0.0).position_m[:2])
     d_des = scenario.formation.d_des_m
     spec = scenario.tree_spec
+    virtual = paper_virtual_obstacles() if scenario.virtual_obstacles == "paper" else ()
     if spec.kind == "paper":
         trees = paper_trees()
         starts = start_positions(count=scenario.vehicles, layout=scenario.start, d_des_m=d_des,
-                                 person_xy_m=person_xy, obstacles=trees)
+                                 person_xy_m=person_xy, obstacles=trees + virtual)
     else:
         starts = start_positions(count=scenario.vehicles, layout=scenario.start, d_des_m=d_des,
-                                 person_xy_m=person_xy)
+                                 person_xy_m=person_xy, obstacles=virtual)
         keep = [(person_xy, 3.0)] + [(s[:2], 3.0) for s in starts]
         trees = () if spec.kind == "none" else random_trees(
             np.random.default_rng(trees_ss), count=spec.count, keep_clear=keep,
@@ -163,6 +177,6 @@ def build_sim(scenario: Scenario, *, controller_params: ControllerParams | None 
         loss=scenario.comm_loss, latency_s=scenario.latency_s, jitter_s=scenario.jitter_s))
     mission = Mission(autopilots=autopilots, world=world, links=links, controller_params=cparams,
                       formation=scenario.formation, params=mission_params, agent_params=agent_params,
-                      clock=clock)
+                      clock=clock, virtual_obstacles=virtual)
     return SimSetup(scenario=scenario, mission=mission, world=world, autopilots=tuple(autopilots),
                     links=links, person=person)

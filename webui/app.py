@@ -55,4 +55,5 @@ class OperatorUi:
 
     def stop(self) -> None:
         """Close viser's server and threads."""
-        self.server.stop()
+        with contextlib.redirect_stdout(io.StringIO()):  # viser announces its stop on stdout
+            self.server.stop()

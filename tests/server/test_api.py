@@ -161,6 +161,7 @@ async def test_put_formation_reaches_the_mission_at_once(station):
 
 
 async def test_a_new_d_des_moves_the_team_to_it(flying):
+    assert abs(horizontal_distances(flying).mean() - 10.0) > 1.0  # the team has to move to pass
     await client_for(flying).put("/api/formation", json={"d_des_m": 10.0, "h_des_m": 8.0})
     took = run_until(flying, lambda _: abs(horizontal_distances(flying).mean() - 10.0) < 1.0, limit_s=30.0)
     assert took < 30.0
@@ -284,6 +285,13 @@ async def test_land_takes_one_mav_out_and_its_teammates_respace_to_180_degrees(f
 async def test_landing_an_unknown_vehicle_is_404_and_changes_nothing(flying):
     await assert_refused(client_for(flying), "POST", "/api/vehicles/7/land", status=404,
                          match="vehicles are [1, 2, 3]")
+
+
+async def test_landing_a_mav_that_is_down_already_is_refused_and_changes_nothing(flying):
+    client = client_for(flying)
+    await client.post("/api/vehicles/2/land")
+    run_until(flying, lambda s: s.vehicles[1].phase == Phase.LANDED, limit_s=30.0)
+    await assert_refused(client, "POST", "/api/vehicles/2/land", match="on the ground already")
 
 
 async def test_land_all_brings_every_mav_to_the_ground(flying):

@@ -30,7 +30,8 @@ def test_methods_protocol_is_se1_to_se4_with_5_mavs_and_30_runs_of_120_and_180_s
     p = exp.paper_protocol("methods")
     methods = [dict(c.settings)["method"] for c in p.conditions]
     assert methods == ["price", "dqmpc", "active", "active"]
-    assert [dict(c.settings)["trees"] for c in p.conditions] == ["none", "none", "none", "paper"]
+    assert [dict(c.settings)["virtual_obstacles"] for c in p.conditions] == ["none", "none", "none", "paper"]
+    assert {dict(c.settings)["trees"] for c in p.conditions} == {"none"}
     assert {dict(c.settings)["vehicles"] for c in p.conditions} == {5}
     assert p.durations_s == (120.0,) * 10 + (180.0,) * 20
 
@@ -157,7 +158,7 @@ def _fake_results(protocol: exp.Protocol, metrics_of) -> list[exp.RunResult]:
 
 def _metrics(error: float, cov: float = 1.0, in_frame: float = 0.95) -> dict:
     return {"tracking_error_m": {"mean": error}, "cov_trace_m2": {"mean": cov}, "in_frame_fraction": in_frame,
-            "center_offset_px": {"mean": 100.0}, "tick_ms": {"median": 1.0}}
+            "center_offset_px": {"mean": 100.0}, "spacing_error_deg": 10.0 * cov, "tick_ms": {"median": 1.0}}
 
 
 def _verdicts(protocol: exp.Protocol, metrics_of) -> list[bool | None]:
@@ -169,7 +170,7 @@ def test_methods_claims_agree_when_active_has_the_lowest_uncertainty_and_keeps_t
     verdicts = _verdicts(exp.quick_protocol("methods"),
                          lambda c, i: _metrics(error=cov[dict(c.settings)["method"]],
                                                cov=cov[dict(c.settings)["method"]] + 0.01 * i))
-    assert verdicts == [True, True, True, True]
+    assert verdicts == [True, True, True, True, True]
 
 
 def test_methods_uncertainty_claim_fails_when_dqmpc_beats_active():
@@ -404,7 +405,7 @@ def test_active_has_lower_mean_uncertainty_than_dqmpc_and_price(ordering):
 
 @pytest.mark.slow
 def test_active_keeps_the_person_in_frame_at_least_90_percent_without_obstacles(ordering):
-    assert _mean(ordering["methods"], rep.IN_FRAME, method="active", trees="none") >= 0.9
+    assert _mean(ordering["methods"], rep.IN_FRAME, method="active", virtual_obstacles="none") >= 0.9
 
 
 @pytest.mark.slow

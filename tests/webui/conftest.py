@@ -14,15 +14,18 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # the harness beside this file
 
 if TYPE_CHECKING:
-    from live_harness import Live
+    from live_harness import Live, OpenPage
     from playwright.sync_api import Browser
+
+EXPECT_TIMEOUT_MS = 20_000  # a software-rendered page on a busy 2-core machine can take seconds per step
 
 
 @pytest.fixture(scope="session")
 def browser() -> Iterator[Browser]:
     from live_harness import CHROMIUM_ARGS
-    from playwright.sync_api import sync_playwright
+    from playwright.sync_api import expect, sync_playwright
 
+    expect.set_options(timeout=EXPECT_TIMEOUT_MS)
     with sync_playwright() as p:
         b = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=CHROMIUM_ARGS)
         yield b
@@ -55,3 +58,13 @@ def live() -> Iterator[Live]:
 def fresh_live() -> Iterator[Live]:
     """A live ground station of its own, flying in formation (for tests that end the flight)."""
     yield from _flying(seed=6)
+
+
+@pytest.fixture(scope="module")
+def operator_page(live: Live, browser: Browser) -> Iterator[OpenPage]:
+    """One browser page on `live`'s landing page, shared by a module's tests that only drive the controls."""
+    from live_harness import close_page, open_page
+
+    opened = open_page(browser, live.urls.api, ui=live.ui)
+    yield opened
+    close_page(opened)

@@ -94,11 +94,12 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
 
 @dataclass
 class OpenPage:
-    """A browser page on the landing page, with everything it logged and requested."""
+    """A browser page on the landing page, with everything it logged and requested, and its viser client."""
 
     page: Page
     console_errors: list[str]
     requests: list[str]
+    client: object = None
 
     @property
     def operator(self) -> FrameLocator:
@@ -106,9 +107,10 @@ class OpenPage:
         return self.page.frame_locator("#operator-view")
 
 
-def open_page(browser: Browser, url: str) -> OpenPage:
+def open_page(browser: Browser, url: str, *, ui=None) -> OpenPage:
     """Open `url` in a new context, recording console errors, page errors and every request URL; wait for the
-    operator page's canvas and controls."""
+    operator page's canvas and controls. With the station's `ui`, also find the page's viser client (the one
+    that connected last)."""
     context = browser.new_context(viewport={"width": 1100, "height": 700})
     page = context.new_page()
     opened = OpenPage(page=page, console_errors=[], requests=[])
@@ -120,6 +122,8 @@ def open_page(browser: Browser, url: str) -> OpenPage:
     frame = page.frame_locator("#operator-view")
     frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
     frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=30_000)
+    if ui is not None:
+        opened.client = newest_client(ui)
     return opened
 
 

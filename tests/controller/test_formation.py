@@ -1,0 +1,305 @@
+"""Specification of one MAV's formation controller (controller/formation.py): its outputs, its reference and
+way-point choices, the three methods, and how it treats bad input."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from controller.formation import FormationController
+from controller.messages import HorizonPlan, Obstacle, PersonEstimate, SolveStatus, VehicleState
+from controller.mpc import MpcParams
+from controller.params import ControllerParams, FormationParams, Method
+from controller.reference import ReferenceParams
+
+FORMATION = FormationParams(d_des_m=8.0, h_des_m=8.0)
+PERSON_AT = np.array([0.0, 0.0, 0.9])
+
+
+def person(position=PERSON_AT, velocity=(0.0, 0.0, 0.0), stamp_s=0.0) -> PersonEstimate:
+    return PersonEstimate(stamp_s=stamp_s, position_m=position, velocity_mps=velocity, cov=np.eye(6) * 0.01)
+
+
+def state(position, velocity=(0.0, 0.0, 0.0), *, vehicle_id=0, stamp_s=0.0, yaw_rad=0.0) -> VehicleState:
+    return VehicleState(vehicle_id=vehicle_id, stamp_s=stamp_s, position_m=position, velocity_mps=velocity,
+                        yaw_rad=yaw_rad)
+
+
+def on_circle(bearing_deg: float, radius_m: float = 8.0, height_m: float = 8.9) -> np.ndarray:
+    b = np.radians(bearing_deg)
+    return np.array([radius_m * np.cos(b), radius_m * np.sin(b), height_m])
+
+
+def hold_plan(position, *, vehicle_id=1, stamp_s=0.0, in_formation=True) -> HorizonPlan:
+    positions = np.repeat(np.asarray(position, dtype=float)[None, :], 17, axis=0)
+    return HorizonPlan(vehicle_id=vehicle_id, stamp_s=stamp_s, dt_s=0.1, positions_m=positions,
+                       velocities_mps=np.zeros((17, 3)), in_formation=in_formation)
+
+
+def controller(method=Method.ACTIVE, **changes) -> FormationController:
+    return FormationController(vehicle_id=0, params=replace(ControllerParams(method=method), **changes))
+
+
+def step(ctrl, own, *, now_s=0.0, who=None, teammates=(), obstacles=(), formation=FORMATION, **kw):
+    return ctrl.step(now_s=now_s, own=own, person=person() if who is None else who, teammates=teammates,
+                     obstacles=obstacles, formation=formation, **kw)
+
+
+def assert_finite_output(out):
+    assert np.all(np.isfinite(out.waypoint_position_m)) and np.all(np.isfinite(out.waypoint_velocity_mps))
+    assert np.isfinite(out.yaw_rad)
+    assert np.all(np.isfinite(out.plan.positions_m)) and np.all(np.isfinite(out.plan.velocities_mps))
+
+
+# ------------------------------------------------------------------------------------------- outputs
+def test_solved_step_sends_the_plans_next_state_as_way_point():
+    out = step(controller(), state(on_circle(30.0, 10.0, 5.0)))
+    assert out.status == SolveStatus.SOLVED and out.fault is None
+    np.testing.assert_array_equal(out.waypoint_position_m, out.plan.positions_m[1])
+    np.testing.assert_array_equal(out.waypoint_velocity_mps, out.plan.velocities_mps[1])
+
+
+def test_yaw_faces_the_person_from_the_way_point():
+    out = step(controller(), state(on_circle(120.0, 10.0, 5.0)))
+    to_person = PERSON_AT[:2] - out.waypoint_position_m[:2]
+    assert out.yaw_rad == pytest.approx(np.arctan2(to_person[1], to_person[0]), abs=1e-12)
+
+
+def test_plan_heads_for_d_des_and_h_des_along_the_current_bearing():
+    own = on_circle(-60.0, 11.0, 5.0)
+    ctrl = controller()
+    for tick in range(120):  # the climb of 3.9 m at the 0.5 m/s bound takes 8 s
+        out = step(ctrl, state(own), now_s=0.1 * tick)
+        own = out.plan.positions_m[1]
+    end = out.plan.positions_m[-1]
+    assert np.hypot(end[0], end[1]) == pytest.approx(8.0, abs=0.3)
+    assert end[2] == pytest.approx(0.9 + 8.0, abs=0.2)
+    assert np.degrees(np.arctan2(end[1], end[0])) == pytest.approx(-60.0, abs=0.5)
+
+
+def test_published_plan_carries_identity_stamp_and_role():
+    ctrl = FormationController(vehicle_id=4, params=ControllerParams())
+    out = ctrl.step(now_s=12.5, own=state(on_circle(0.0), vehicle_id=4), person=person(), teammates=(),
+                    obstacles=(), formation=FORMATION, in_formation=False)
+    plan = out.plan
+    assert (plan.vehicle_id, plan.stamp_s, plan.dt_s, plan.in_formation) == (4, 12.5, 0.1, False)
+    assert out.plan.positions_m.shape == (17, 3)
+
+
+def test_way_point_step_is_a_parameter():
+    out = step(controller(reference=ReferenceParams(waypoint_step=4)), state(on_circle(10.0, 10.0, 5.0)))
+    np.testing.assert_array_equal(out.waypoint_position_m, out.plan.positions_m[4])
+
+
+# ------------------------------------------------------------------------------------ reference choices
+def test_plan_starts_from_the_previous_plan_when_the_vehicle_is_on_it():
+    ctrl = controller()
+    first = step(ctrl, state(on_circle(0.0, 10.0, 5.0)))
+    lagging = first.plan.positions_m[1] + np.array([0.4, 0.0, 0.0])  # within the 1 m leash
+    second = step(ctrl, state(lagging, first.plan.velocities_mps[1]), now_s=0.1)
+    np.testing.assert_allclose(second.plan.positions_m[0], first.plan.positions_m[1], atol=1e-12)
+
+
+def test_plan_start_is_pulled_onto_the_leash_towards_a_distant_vehicle():
+    ctrl = controller()
+    first = step(ctrl, state(on_circle(0.0, 10.0, 5.0)))
+    measured = first.plan.positions_m[1] + np.array([0.0, 5.0, 0.0])
+    second = step(ctrl, state(measured, first.plan.velocities_mps[1]), now_s=0.1)
+    np.testing.assert_allclose(second.plan.positions_m[0], measured - np.array([0.0, 1.0, 0.0]), atol=1e-9)
+
+
+def test_pass_through_lets_the_inputs_act_uncancelled():
+    own = state(on_circle(0.0))  # at its reference point, at rest; a neighbour 20 deg away pushes sideways
+    mate = [hold_plan(on_circle(20.0))]
+    free = step(controller(), own, teammates=mate)
+    fought = step(controller(reference=ReferenceParams(pass_through=False)), own, teammates=mate)
+    f0 = free.external_inputs[0, :2]
+    assert np.linalg.norm(f0) > 0.5
+    free_accel = (free.plan.velocities_mps[1, :2] - 0.0) / 0.1
+    fought_accel = (fought.plan.velocities_mps[1, :2] - 0.0) / 0.1
+    np.testing.assert_allclose(free_accel, f0, atol=1e-3)
+    assert np.linalg.norm(fought_accel) < 0.2 * np.linalg.norm(f0)
+
+
+def test_preferred_bearing_sets_the_terminal_reference():
+    ctrl = controller()
+    own = on_circle(0.0)
+    for tick in range(100):
+        out = step(ctrl, state(own), now_s=0.1 * tick, preferred_bearing_rad=np.radians(45.0))
+        own = out.plan.positions_m[1]
+    assert np.degrees(np.arctan2(own[1], own[0])) == pytest.approx(45.0, abs=3.0)
+    assert np.hypot(own[0], own[1]) == pytest.approx(8.0, abs=0.5)
+
+
+def test_non_finite_preferred_bearing_is_ignored_and_counted():
+    ctrl = controller()
+    out = step(ctrl, state(on_circle(0.0)), preferred_bearing_rad=float("nan"))
+    assert out.status == SolveStatus.SOLVED
+    assert ctrl.stats.ignored_bearings == 1
+
+
+# ---------------------------------------------------------------------------------------- team size
+def test_only_in_formation_teammates_steer_the_spacing():
+    own = state(on_circle(0.0))
+    near_bearing = on_circle(25.0, 8.0)  # 3.5 m away: outside the teammate repulsion's 3 m
+    left = step(controller(), own, teammates=[hold_plan(near_bearing, in_formation=False)])
+    spaced = step(controller(), own, teammates=[hold_plan(near_bearing, in_formation=True)])
+    np.testing.assert_array_equal(left.external_inputs, 0.0)
+    assert np.linalg.norm(spaced.external_inputs[0]) > 0.1
+
+
+def test_out_of_formation_teammate_is_still_avoided():
+    own = state(on_circle(0.0))
+    close = on_circle(0.0) + np.array([0.0, 2.0, 0.0])
+    out = step(controller(), own, teammates=[hold_plan(close, in_formation=False)])
+    assert out.external_inputs[0, 1] < -0.1
+
+
+# ------------------------------------------------------------------------------------------- methods
+@pytest.mark.parametrize("method", list(Method))
+def test_each_method_solves_with_teammates_and_trees(method):
+    ctrl = controller(method)
+    mates = [hold_plan(on_circle(b), vehicle_id=i + 1) for i, b in enumerate((15.0, 100.0, -90.0))]
+    trees = [Obstacle(obstacle_id="t", center_m=np.array([8.5, 2.0]), radius_m=0.3)]
+    own = on_circle(0.0, 9.0, 6.0)
+    for tick in range(20):
+        out = step(ctrl, state(own), now_s=0.1 * tick, teammates=mates, obstacles=trees)
+        assert out.status == SolveStatus.SOLVED
+        assert_finite_output(out)
+        own = out.plan.positions_m[1]
+
+
+def test_dqmpc_does_not_steer_the_spacing():
+    own = state(on_circle(0.0))
+    out = step(controller(Method.DQMPC), own, teammates=[hold_plan(on_circle(30.0))])
+    np.testing.assert_array_equal(out.external_inputs, 0.0)  # 4.1 m away: beyond DQMPC's 4 m
+
+
+def test_price_avoids_only_the_teammates_current_position():
+    own = state(on_circle(0.0))
+    crossing = np.repeat(on_circle(90.0)[None, :], 17, axis=0)
+    crossing[5:] = on_circle(0.0) + np.array([0.0, 1.0, 0.0])  # its plan later crosses our position
+    plan = HorizonPlan(vehicle_id=1, stamp_s=0.0, dt_s=0.1, positions_m=crossing,
+                       velocities_mps=np.zeros((17, 3)))
+    price = step(controller(Method.PRICE), own, teammates=[plan])
+    active = step(controller(Method.ACTIVE), own, teammates=[plan])
+    np.testing.assert_allclose(price.external_inputs[:, :2], 0.0, atol=1e-12)
+    assert np.abs(active.external_inputs[5:, 1]).max() > 1.0
+
+
+def test_price_aims_at_zero_terminal_velocity():
+    walking = person(velocity=(1.0, 0.0, 0.0))
+    ctrl = controller(Method.PRICE)
+    own = on_circle(90.0)
+    for tick in range(30):
+        out = step(ctrl, state(own), now_s=0.1 * tick, who=walking)
+        own = out.plan.positions_m[1]
+    np.testing.assert_allclose(out.plan.velocities_mps[-1], 0.0, atol=0.05)
+
+
+# ------------------------------------------------------------------------------------------ bad input
+def test_no_person_brakes_to_rest():
+    ctrl = controller()
+    out = ctrl.step(now_s=0.0, own=state(on_circle(0.0), (2.0, 1.0, 0.0)), person=None, teammates=(),
+                    obstacles=(), formation=FORMATION)
+    assert out.status == SolveStatus.NO_PERSON
+    np.testing.assert_allclose(out.plan.velocities_mps[-1], 0.0, atol=1e-9)
+    assert np.linalg.norm(out.waypoint_velocity_mps) < np.hypot(2.0, 1.0)
+
+
+@pytest.mark.parametrize("field, value", [("position_m", (np.nan, 0.0, 5.0)),
+                                          ("velocity_mps", (0.0, np.inf, 0.0))])
+def test_non_finite_own_state_brakes_with_a_finite_way_point(field, value):
+    ctrl = controller()
+    good = step(ctrl, state(on_circle(0.0, 10.0, 5.0)))
+    bad = {"position_m": good.plan.positions_m[1], "velocity_mps": good.plan.velocities_mps[1], field: value}
+    out = step(ctrl, state(bad["position_m"], bad["velocity_mps"]), now_s=0.1)
+    assert out.status == SolveStatus.BRAKING and "own state" in out.fault
+    assert_finite_output(out)
+    assert ctrl.stats.rejected_inputs == 1
+
+
+def test_non_finite_own_state_on_the_first_tick_still_gives_a_finite_way_point():
+    out = step(controller(), state((np.nan, np.nan, np.nan), (np.nan, 0.0, 0.0)))
+    assert out.status == SolveStatus.BRAKING
+    assert_finite_output(out)
+
+
+def test_non_finite_person_estimate_brakes():
+    out = step(controller(), state(on_circle(0.0)), who=person(position=(np.nan, 0.0, 0.9)))
+    assert out.status == SolveStatus.BRAKING and "person" in out.fault
+    assert_finite_output(out)
+
+
+@pytest.mark.parametrize("formation", [FormationParams(d_des_m=float("nan")), FormationParams(d_des_m=-3.0),
+                                       FormationParams(h_des_m=float("inf"))])
+def test_invalid_formation_parameters_brake(formation):
+    out = step(controller(), state(on_circle(0.0)), formation=formation)
+    assert out.status == SolveStatus.BRAKING and "formation parameters" in out.fault
+    assert_finite_output(out)
+
+
+def test_non_finite_time_brakes():
+    out = step(controller(), state(on_circle(0.0)), now_s=float("nan"))
+    assert out.status == SolveStatus.BRAKING and "time" in out.fault
+    assert_finite_output(out)
+
+
+def test_garbage_teammate_plans_are_dropped_and_counted():
+    ctrl = controller()
+    nan_plan = hold_plan((np.nan, 1.0, 8.0), vehicle_id=1)
+    own_echo = hold_plan(on_circle(10.0), vehicle_id=0)
+    late_nan = HorizonPlan(vehicle_id=2, stamp_s=float("nan"), dt_s=0.1, positions_m=np.ones((17, 3)),
+                           velocities_mps=np.zeros((17, 3)))
+    out = step(ctrl, state(on_circle(0.0)), teammates=[nan_plan, own_echo, late_nan])
+    assert out.status == SolveStatus.SOLVED
+    assert ctrl.stats.rejected_plans == 3
+    np.testing.assert_array_equal(out.external_inputs, 0.0)
+
+
+def test_obstacle_with_non_finite_centre_is_counted():
+    ctrl = controller()
+    bad = Obstacle(obstacle_id="x", center_m=np.array([np.nan, 1.0]), radius_m=0.3)
+    out = step(ctrl, state(on_circle(0.0)), obstacles=[bad])
+    assert out.status == SolveStatus.SOLVED and ctrl.stats.rejected_obstacles == 1
+
+
+def test_solver_failure_falls_back_to_braking():
+    stubborn = MpcParams(max_iterations=1, accept_inaccurate=False, polishing=False)
+    ctrl = controller(mpc=stubborn)
+    out = step(ctrl, state(on_circle(0.0, 12.0, 4.0), (3.0, -2.0, 0.0)))
+    assert out.status == SolveStatus.BRAKING and out.fault.startswith("MPC:")
+    assert_finite_output(out)
+    assert ctrl.stats.braking == 1
+
+
+def test_random_garbage_never_yields_a_non_finite_way_point():
+    rng = np.random.default_rng(2024)
+    specials = np.array([np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0])
+
+    def vec(n=3):
+        v = rng.normal(0.0, 10.0, n)
+        mask = rng.random(n) < 0.3
+        v[mask] = rng.choice(specials, mask.sum())
+        return v
+
+    for method in Method:
+        ctrl = controller(method)
+        for tick in range(60):
+            mates = [HorizonPlan(vehicle_id=int(rng.integers(0, 4)), stamp_s=float(vec(1)[0]),
+                                 dt_s=float(rng.choice([0.1, 0.0, -1.0, np.nan])),
+                                 positions_m=np.stack([vec() for _ in range(17)]),
+                                 velocities_mps=np.zeros((17, 3)))
+                     for _ in range(int(rng.integers(0, 4)))]
+            who = None if rng.random() < 0.1 else person(position=vec(), velocity=vec())
+            formation = FormationParams(d_des_m=float(rng.choice([8.0, 8.0, np.nan, -1.0, 1e9])),
+                                        h_des_m=float(rng.choice([8.0, 8.0, np.inf])))
+            bearing = float(rng.choice([np.nan, 1.0])) if rng.random() < 0.2 else None
+            now_s = float(rng.choice([0.1 * tick, 0.1 * tick, np.nan]))
+            out = ctrl.step(now_s=now_s, own=state(vec(), vec()), person=who, teammates=mates, obstacles=(),
+                            formation=formation, preferred_bearing_rad=bearing)
+            assert_finite_output(out)
+        stats = ctrl.stats
+        assert stats.ticks == 60 == stats.solved + stats.braking + stats.no_person
