@@ -200,9 +200,9 @@ class ObstacleSet:
 
     @classmethod
     def from_obstacles(cls, obstacles: Sequence[Obstacle]) -> ObstacleSet:
-        """Stack obstacles; one with a non-finite centre is dropped (callers count `len(obstacles) -
-        count`)."""
-        kept = [o for o in obstacles if np.all(np.isfinite(o.center_m))]
+        """Stack obstacles; one with a non-finite (or beyond 1000 km) centre is dropped (callers count
+        `len(obstacles) - count`)."""
+        kept = [o for o in obstacles if float(np.abs(o.center_m).max()) < SANE_ABS]
         if not kept:
             return cls(np.zeros((0, 2)), np.zeros(0), np.zeros(0))
         return cls(np.array([o.center_m for o in kept]), np.array([o.radius_m for o in kept]),
@@ -248,7 +248,7 @@ def cotangential_magnitude(d, *, d_min, d_max, gain, freeze_fraction: float = 0.
     d_arr = np.asarray(d, dtype=float)
     lo = np.asarray(d_min, dtype=float)
     span = np.asarray(d_max, dtype=float) - lo
-    if np.any(span <= 0.0):
+    if (span <= 0.0).any():
         raise ValueError("cotangential_magnitude needs d_min < d_max")
     z0 = HALF_PI * freeze_fraction
     frac = np.clip((d_arr - lo) / span, 0.0, 1.0)
@@ -367,7 +367,7 @@ def _away(diff_xy: np.ndarray, dist: np.ndarray, tie_sign) -> np.ndarray:
     """Unit vectors along diff_xy (..., 2); where dist ~ 0, +-x by tie_sign so that two MAVs split."""
     unit = diff_xy / np.where(dist > 1e-9, dist, np.inf)[..., None]
     tie = dist <= 1e-9
-    if np.any(tie):
+    if tie.any():
         fallback = np.zeros_like(unit)
         fallback[..., 0] = np.broadcast_to(tie_sign, dist.shape)
         unit = np.where(tie[..., None], fallback, unit)
@@ -396,10 +396,16 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
     gamma_j = np.arctan2(mates_rel_xy[..., 1], mates_rel_xy[..., 0])
     signed = _wrap(gamma[None, :] - gamma_j)
     d_max = TWO_PI / team_size
-    mag = cotangential_magnitude(np.abs(signed), d_min=params.tracking_min_fraction * d_max, d_max=d_max,
+    delta = np.abs(signed)
+    within = (delta < d_max).any(axis=1)  # only teammates closer than 2 pi / K at some step push
+    if not within.any():
+        return np.zeros_like(rel_xy)
+    signed, delta, mate_ids = signed[within], delta[within], mate_ids[within]
+    mag = cotangential_magnitude(delta, d_min=params.tracking_min_fraction * d_max, d_max=d_max,
                                  gain=params.gain, freeze_fraction=params.freeze_fraction)
     side = np.sign(signed)
-    side = np.where(side == 0.0, np.where(own_id < mate_ids, -1.0, 1.0)[:, None], side)
+    if (side == 0.0).any():
+        side = np.where(side == 0.0, np.where(own_id < mate_ids, -1.0, 1.0)[:, None], side)
     scalar = (np.abs(d_des_m - rho) + params.tracking_c) * (mag * side).sum(axis=0)
     return scalar[:, None] * _tangents(rel_xy, rho)
 
@@ -408,11 +414,16 @@ def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, pea
                      tie_sign=1.0) -> np.ndarray:
     """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eq. 14), (N+1, 2).
 
-    diff_xy (M, N+1, 2) from each source to us; dist (M, N+1) the distance the thresholds apply to; d_min and
-    d_max broadcast against dist; the field equals `peak` at d_min.
+    diff_xy (M, N+1, 2) from each source to us; dist (M, N+1) the distance the thresholds apply to; d_min a
+    float, d_max and tie_sign floats or (M, 1) columns; the field equals `peak` at d_min. Sources never within
+    d_max are skipped.
     """
-    if diff_xy.shape[0] == 0:
+    within = (dist < d_max).any(axis=1) if diff_xy.shape[0] else np.zeros(0, dtype=bool)
+    if not within.any():
         return np.zeros(diff_xy.shape[1:])
+    diff_xy, dist = diff_xy[within], dist[within]
+    d_max = d_max[within] if np.ndim(d_max) == 2 else d_max
+    tie_sign = tie_sign[within] if np.ndim(tie_sign) == 2 else tie_sign
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
     mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain,
                                  freeze_fraction=params.freeze_fraction)
@@ -438,7 +449,7 @@ def obstacle_inputs(*, diff_xy: np.ndarray, surface: np.ndarray, rel_xy: np.ndar
     mag = np.where(active, mag, 0.0)
     unit = _away(diff_xy, surface + obstacles.radii_m[:, None], 1.0)
     force = (mag[..., None] * unit).sum(axis=0)
-    if params.obstacle_slide > 0.0 and np.any(mag > 0.0):
+    if params.obstacle_slide > 0.0 and (mag > 0.0).any():
         tangent = _tangents(rel_xy, rho)
         blocked = np.abs(np.einsum("mni,ni->mn", unit, tangent))
         rho_m = np.sqrt(np.einsum("mni,mni->mn", obstacles.centers_m[:, None, :] - person_xy[None],
@@ -506,7 +517,7 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
     zero = np.zeros((steps, 2))
     tracking = teammate = obstacle = person = approach = zero
 
-    if terms.tracking and in_formation and teammates.count and np.any(teammates.in_formation):
+    if terms.tracking and in_formation and teammates.count and teammates.in_formation.any():
         mates = teammates.in_formation
         mates_rel = teammates.positions_m[mates, :, :2] - person_xy[None]
         tracking = clamp_norm(tracking_inputs(rel_xy=rel, rho=rho, mates_rel_xy=mates_rel,
@@ -535,26 +546,26 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
             d_min, d_max = params.obstacle_d_min_m, params.obstacle_d_max_m
         # A cylinder counts only where the MAV is not clearly above its top.
         below_top = own[None, :, 2] < obstacles.heights_m[:, None] + d_min
-        if terms.obstacles and np.any(below_top & (surface < d_max)):
+        if terms.obstacles and (below_top & (surface < d_max)).any():
             obstacle = obstacle_inputs(diff_xy=diff, surface=surface, rel_xy=rel, rho=rho,
                                        person_xy=person_xy, obstacles=obstacles, d_min=d_min, d_max=d_max,
                                        person_d_min_m=params.person_d_min_fraction * d_des_m,
                                        active=below_top, params=params)
         if terms.approach and in_formation:
             near = below_top & (surface < params.approach_range_m)
-            if np.any(near):
+            if near.any():
                 approach = clamp_norm(approach_inputs(own_xy=own_xy, rel_xy=rel, rho=rho, person_xy=person_xy,
                                                       obstacles=obstacles, active=near, params=params),
                                       params.approach_max_mps2)
 
     if terms.person:
         lo, hi = params.person_d_min_fraction * d_des_m, params.person_d_max_fraction * d_des_m
-        if hi > lo and np.any(rho < hi):
+        if hi > lo and (rho < hi).any():
             person = repulsion_inputs(diff_xy=rel[None], dist=rho[None], d_min=lo, d_max=hi,
                                       peak=params.person_peak_mps2, params=params)
 
     total_xy = clamp_norm(tracking + teammate + obstacle + person + approach, params.f_max_mps2)
-    fault = not bool(np.all(np.isfinite(total_xy)))
+    fault = not bool(np.isfinite(total_xy).all())
     if fault:
         total_xy = zero
 

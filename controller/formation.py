@@ -91,7 +91,7 @@ class _Tick:
 
 
 def _finite(*arrays) -> bool:
-    return all(bool(np.all(np.isfinite(a))) for a in arrays)
+    return all(bool(np.isfinite(a).all()) for a in arrays)
 
 
 def _sane(*arrays) -> bool:

@@ -14,9 +14,12 @@ import html
 import math
 from typing import Annotated
 
+import swagger_ui_bundle
 from fastapi import FastAPI, Path, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
+from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
 from server.commands import CommandError, UnknownTargetError
@@ -189,7 +192,16 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
                   description="Live state and operator commands for a team of MAVs flying the "
                               "active-perception formation. Refusals are HTTP 422 with a message saying what "
                               "to do instead.",
-                  version="0.1.0")
+                  version="0.1.0", docs_url=None)
+    # /docs from the swagger-ui files of the installed wheel: the field laptop may have no internet.
+    app.mount("/static/swagger", StaticFiles(directory=swagger_ui_bundle.swagger_ui_path), name="swagger")
+
+    @app.get("/docs", response_class=HTMLResponse, include_in_schema=False)
+    async def docs() -> HTMLResponse:
+        return get_swagger_ui_html(openapi_url=app.openapi_url, title="skyring API",
+                                   swagger_js_url="/static/swagger/swagger-ui-bundle.js",
+                                   swagger_css_url="/static/swagger/swagger-ui.css",
+                                   swagger_favicon_url="/static/swagger/favicon-32x32.png")
 
     @app.exception_handler(UnknownTargetError)
     async def _unknown(_: Request, exc: UnknownTargetError) -> JSONResponse:

@@ -30,8 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.params import ControllerParams, FormationParams
+from vehicles.person import PERSON_CENTRE_HEIGHT_M
 
-PERSON_CENTER_HEIGHT_M = 0.9  # the person's position message is the body centre, 0.9 m above the ground
+PERSON_CENTER_HEIGHT_M = PERSON_CENTRE_HEIGHT_M  # the person's position message: body centre above the ground
 
 
 class CommandError(ValueError):

@@ -144,6 +144,16 @@ async def test_landing_page_embeds_the_operator_view():
     assert 'href="/docs"' in page.text
 
 
+async def test_docs_page_loads_swagger_from_this_server_only():
+    client = client_for(make_station())
+    page = await client.get("/docs")
+    assert page.status_code == 200
+    assert "/static/swagger/swagger-ui-bundle.js" in page.text
+    assert "cdn" not in page.text.lower()
+    script = await client.get("/static/swagger/swagger-ui-bundle.js")
+    assert script.status_code == 200 and len(script.content) > 100_000
+
+
 async def test_openapi_documents_every_endpoint():
     paths = (await client_for(make_station()).get("/openapi.json")).json()["paths"]
     assert {"/api/state", "/api/formation", "/api/formation/start", "/api/formation/stop", "/api/obstacles",
