@@ -42,6 +42,8 @@ METRIC_ORDER: tuple[str, ...] = (
     "min_person_distance_m",
 )
 TIMING_PREFIXES: tuple[str, ...] = ("tick_ms", "realtime_factor")
+# Bookkeeping (how many frames, samples, messages, rejections): summed per condition, not tabulated.
+COUNT_PREFIXES: tuple[str, ...] = ("counters", "frames", "samples")
 
 # Tolerances of the paper's qualitative claims, stated in the report next to each verdict.
 IN_FRAME_MIN = 0.90  # paper: "almost 94 %" of frames with the person fully in the image (SE3)
@@ -64,9 +66,18 @@ def flatten(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
     return flat
 
 
+def metric_kind(metric: str) -> str:
+    """ "timing" for metrics measured with a clock (they vary between otherwise identical runs), "count" for
+    bookkeeping counters, "result" for everything else."""
+    head = metric.split(".")[0]
+    if head in TIMING_PREFIXES:
+        return "timing"
+    return "count" if head in COUNT_PREFIXES else "result"
+
+
 def is_timing(metric: str) -> bool:
-    """True for metrics measured with a clock (they vary between otherwise identical runs)."""
-    return metric.split(".")[0] in TIMING_PREFIXES
+    """True for metrics measured with a clock."""
+    return metric_kind(metric) == "timing"
 
 
 @dataclass(frozen=True)
@@ -133,9 +144,9 @@ class FamilySummary:
     def family(self) -> str:
         return self.protocol.family
 
-    def metrics(self, *, timing: bool) -> list[str]:
-        """Metric names present in any run, table order; timing metrics only or none of them."""
-        names = {m for c in self.conditions for m in c.values if is_timing(m) == timing}
+    def metrics(self, kind: str) -> list[str]:
+        """Names of the metrics of `kind` (see `metric_kind`) present in any run, in table order."""
+        names = {m for c in self.conditions for m in c.values if metric_kind(m) == kind}
         ordered = [m for m in METRIC_ORDER if m in names]
         return ordered + sorted(names - set(ordered))
 
@@ -193,13 +204,19 @@ def _fmt(v: float | None) -> str:
     return f"{v:.{max(0, 2 - int(math.floor(math.log10(abs(v)))))}f}"
 
 
-def _lower_p(a: Sequence[float], b: Sequence[float]) -> float | None:
-    """One-sided Mann-Whitney U p-value that `a` tends to be below `b` (None: too few runs)."""
-    a = [v for v in a if math.isfinite(v)]
-    b = [v for v in b if math.isfinite(v)]
-    if len(a) < 2 or len(b) < 2:
-        return None
-    return float(scipy_stats.mannwhitneyu(a, b, alternative="less").pvalue)
+def _paired_text(best: Sequence[float], other: Sequence[float]) -> str:
+    """How many paired runs (same run index, hence the same world) have `best` below `other`; from 5 pairs on,
+    also the one-sided Wilcoxon signed-rank p-value."""
+    pairs = [(a, b) for a, b in zip(best, other, strict=False) if math.isfinite(a) and math.isfinite(b)]
+    if not pairs:
+        return ""
+    text = f"lower in {sum(a < b for a, b in pairs)} of {len(pairs)} paired runs"
+    diffs = [a - b for a, b in pairs]
+    if len(pairs) >= 5 and any(diffs):
+        text += (
+            f", one-sided Wilcoxon p = {_fmt(float(scipy_stats.wilcoxon(diffs, alternative='less').pvalue))}"
+        )
+    return text
 
 
 def _lower_than_all(
@@ -221,10 +238,10 @@ def _lower_than_all(
         if m is None:
             return ClaimCheck(family, claim, f"{metric} missing for {o.condition.name}", None)
         agrees = agrees and ours < m
-        p = _lower_p(best.values.get(metric, ()), o.values.get(metric, ()))
+        paired = _paired_text(best.values.get(metric, ()), o.values.get(metric, ()))
         parts.append(
             f"{o.condition.name} {_fmt(m)} {unit} ({best.condition.name} {(ours - m) / m:+.1%}"
-            + ("" if p is None else f", one-sided Mann-Whitney p = {_fmt(p)}")
+            + (f", {paired}" if paired else "")
             + ")"
         )
     evidence = f"mean {metric}: {best.condition.name} {_fmt(ours)} {unit} vs " + ", ".join(parts)
@@ -408,6 +425,11 @@ TITLES = {
 TIMING_HEADING = "## Timing"
 
 
+def _total(values: Sequence[float]) -> str:
+    finite = [v for v in values if math.isfinite(v)]
+    return f"{sum(finite):.0f}" if finite else "n/a"
+
+
 def _cell(stat: Stat | None) -> str:
     if stat is None:
         return "n/a"
@@ -435,13 +457,13 @@ def family_table(summary: FamilySummary) -> str:
     """The family's table: a row per metric, a column per condition; cells mean / median (IQR) over runs."""
     conds = summary.conditions
     rows = [["runs ok / failed", *(f"{c.runs_ok} / {c.runs_failed}" for c in conds)]]
-    rows += [[m, *(_cell(c.stat(m)) for c in conds)] for m in summary.metrics(timing=False)]
+    rows += [[m, *(_cell(c.stat(m)) for c in conds)] for m in summary.metrics("result")]
     return markdown_table(["metric", *(c.condition.name for c in conds)], rows)
 
 
 def timing_table(summaries: Sequence[FamilySummary], results: Sequence[RunResult]) -> str:
     """Per condition: the median over runs of each timing metric and the summed wall time of its runs."""
-    names = sorted({m for s in summaries for m in s.metrics(timing=True)})
+    names = sorted({m for s in summaries for m in s.metrics("timing")})
     rows = []
     for s in summaries:
         for c in s.conditions:
@@ -474,8 +496,10 @@ def render_report(
         "# skyring experiments: the paper's simulation study, rerun",
         "",
         f"Command: `{context.command}` (profile: {context.profile}; base seed {context.base_seed}). "
-        "Every run is an independent process with its own seed derived from (base seed, family, condition, "
-        "run index); its JSON report is kept beside this file under `<family>/<condition>/run-NNN.json`. "
+        "Every run is an independent process with a seed derived from (base seed, family, run index): run i "
+        "of every condition of a family flies the same world (person, trees, GPS drift, detector noise), a "
+        "paired comparison. Each run's JSON report is kept beside this file under "
+        "`<family>/<condition>/run-NNN.json`. "
         "The same command gives this "
         f"report again, character for character, down to the `{TIMING_HEADING[3:]}` section.",
         "",
@@ -509,6 +533,15 @@ def render_report(
             family_table(s),
             "",
         ]
+        counts = s.metrics("count")
+        if counts:
+            lines += ["Counters, summed over each condition's runs:", ""]
+            for c in s.conditions:
+                totals = ", ".join(
+                    f"{m.removeprefix('counters.')} {_total(c.values.get(m, ()))}" for m in counts
+                )
+                lines.append(f"- {c.condition.name}: {totals}")
+            lines.append("")
         for fig in figures.get(s.family, ()):
             lines.append(f"![{s.family}]({fig})")
         lines += ["", "The paper's claims against our numbers:", ""]

@@ -3,8 +3,9 @@
 A *family* is one of the paper's studies (Sec. V-B): `methods` (SE1-SE4), `scalability` (3..16 MAVs),
 `commloss` (link loss) and `obstacles` (obstacle count). Each family is a list of *conditions* (one cell of
 the sweep: a set of `SimConfig` fields) run `runs` times. Every run is an independent worker process whose
-seed is derived from (base seed, family, condition, run index) with numpy's `SeedSequence`, so the same
-command gives the same runs in any order and with any number of workers.
+seed is derived from (base seed, family, run index) with numpy's `SeedSequence`, so the same command gives the
+same runs in any order and with any number of workers, and run i of every condition of a family flies the
+same world (a paired comparison; see `derive_seed`).
 """
 
 from __future__ import annotations
@@ -279,16 +280,19 @@ def _stable_key(text: str) -> int:
     return zlib.crc32(text.encode("utf-8"))
 
 
-def derive_seed(*, base_seed: int, family: str, condition: str, run_index: int) -> int:
-    """The seed of one run, from (base seed, family, condition name, run index) via `np.random.SeedSequence`.
+def derive_seed(*, base_seed: int, family: str, run_index: int) -> int:
+    """The seed of run `run_index` of every condition of `family`, via `np.random.SeedSequence` from
+    (base seed, family, run index).
 
-    Independent of the order in which runs execute and of the number of workers; differs for every run.
+    The condition is deliberately left out: run i of each condition flies the same world (person, trees, GPS
+    drift, detector noise), a paired design (common random numbers), so a difference between two conditions
+    comes from the conditions and not from luck. Measured: with 8 MAVs and 60 s runs, the run-to-run spread of
+    the mean tracking error (0.28-0.59 m, mostly GPS drift) hid the 0 % vs 25 % link-loss comparison, while
+    paired runs differed by 8 % at most. Independent of the order of execution and of the number of workers.
     """
     if base_seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {base_seed}")
-    seq = np.random.SeedSequence(
-        entropy=base_seed, spawn_key=(_stable_key(family), _stable_key(condition), run_index)
-    )
+    seq = np.random.SeedSequence(entropy=base_seed, spawn_key=(_stable_key(family), run_index))
     return int(seq.generate_state(1, dtype=np.uint32)[0])
 
 
@@ -300,7 +304,7 @@ def plan_runs(protocols: Sequence[Protocol], *, base_seed: int) -> list[RunSpec]
             condition=c,
             run_index=i,
             duration_s=d,
-            seed=derive_seed(base_seed=base_seed, family=p.family, condition=c.name, run_index=i),
+            seed=derive_seed(base_seed=base_seed, family=p.family, run_index=i),
             rate_hz=p.rate_hz,
         )
         for p in protocols

@@ -8,6 +8,7 @@ time).
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from server.experiment_report import CENTER, ERROR, IN_FRAME, UNCERTAINTY, Famil
 FIGURE_SIZE_IN = (6.4, 4.2)
 DPI = 120
 FIGURES_DIR = "figures"
+LABEL_WIDTH_CHARS = 14  # tick labels wrap beyond this, so four method names fit side by side
 
 # (metric, file stem, axis label) of the methods box plots.
 METHOD_PANELS: tuple[tuple[str, str, str], ...] = (
@@ -85,7 +87,7 @@ def box_plot(
             positions=xs[drawn],
             widths=width,
             showfliers=False,
-            tick_labels=[labels[i] for i in drawn],
+            tick_labels=[textwrap.fill(labels[i], LABEL_WIDTH_CHARS) for i in drawn],
             medianprops={"color": "tab:orange"},
         )
         for i in drawn:

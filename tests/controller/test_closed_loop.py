@@ -190,7 +190,7 @@ WALKING_SIZES = [3, 5, 8, 16]
 @pytest.mark.parametrize("team_size", ALL_SIZES)
 def test_team_around_a_standing_person_converges_well_within_60_s(team_size):
     run = standing_run(team_size)
-    assert convergence_time_s(run) <= 40.0  # measured 9.5-16.3 s for K = 2..16
+    assert convergence_time_s(run) <= 40.0  # measured 9.5-17.3 s for K = 2..16
     assert spacing_error_deg(run)[-1] < 5.0
     assert distance_error_m(run)[-1] < 0.5 and height_error_m(run)[-1] < 0.3
 
@@ -211,7 +211,7 @@ def test_team_around_a_standing_person_solves_every_tick(team_size):
 def test_spacing_follows_a_person_walking_at_1_mps(team_size):
     run = walking_run(team_size)
     last = run.times_s > 60.0
-    assert spacing_error_deg(run)[last].max() < 15.0  # measured max 1.3-7.3 deg
+    assert spacing_error_deg(run)[last].max() < 15.0  # measured max 1.0-5.6 deg
     assert distance_error_m(run)[last].max() < 0.6
 
 

@@ -12,6 +12,7 @@ from controller.fields import (
     ObstacleSet,
     TeammatePaths,
     cotangential_magnitude,
+    covariance_radius_m,
     external_inputs,
     peak_gain,
     plan_path,
@@ -351,6 +352,20 @@ def test_teammate_d_max_grows_with_covariance_and_message_age():
     assert fresh.d_max_m[0] == pytest.approx(3.0)
     assert stale.d_max_m[0] == pytest.approx(3.0 + 5.0 * 0.5)
     assert wide.d_max_m[0] == pytest.approx(3.0 + 1.5)
+
+
+def test_covariance_radius_is_the_root_of_the_largest_eigenvalue():
+    rotation = np.array([[0.6, -0.8, 0.0], [0.8, 0.6, 0.0], [0.0, 0.0, 1.0]])
+    tilted = rotation @ np.diag([9.0, 1.0, 4.0]) @ rotation.T
+    assert covariance_radius_m(tilted) == pytest.approx(3.0)
+    np.testing.assert_allclose(covariance_radius_m(np.stack([np.eye(3) * 0.25, tilted])), [0.5, 3.0])
+
+
+def test_teammate_plan_with_absurd_numbers_is_dropped_and_counted():
+    bad = straight_plan(stamp_s=0.0, vehicle_id=2, cov_scale=1e12)
+    team = teammate_paths([straight_plan(stamp_s=0.0), bad], now_s=0.1, dt_s=0.1, steps=16,
+                          own_cov_radius_m=0.5, params=DEFAULTS)
+    assert (team.count, team.rejected) == (1, 1)
 
 
 def test_price_reads_only_the_first_state_of_a_plan():

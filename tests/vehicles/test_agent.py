@@ -110,14 +110,65 @@ def test_a_newer_plan_replaces_an_older_one_but_not_the_reverse():
     assert agent.teammate_plans(1.1)[0].stamp_s == 1.0
 
 
+ROSTER = ((1, 0.0), (2, 2.0 * math.pi / 3.0), (3, 4.0 * math.pi / 3.0))
+
+
 def test_the_roster_slot_is_used_only_while_teammates_are_unheard():
     agent = Agent(vehicle_id=1)
-    alone = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), slot_bearing_rad=0.0, slot_count=3))
+    alone = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), roster=ROSTER))
     assert alone.used_slot and alone.teammates_known == 0
     mates = (_plan(2, 0.05, [-4.0, 6.9, 8.9]), _plan(3, 0.05, [-4.0, -6.9, 8.9]))
-    heard = agent.tick(0.1, _inputs(0.1, received=mates, slot_bearing_rad=0.0, slot_count=3))
+    heard = agent.tick(0.1, _inputs(0.1, received=mates, roster=ROSTER))
     assert not heard.used_slot and heard.teammates_known == 2
     assert heard.counters.slot_ticks == 1
+
+
+class _Recorder:
+    """Stands in for the controller to see what the agent hands it (and hold where it is)."""
+
+    def __init__(self, inner):
+        self.inner, self.calls = inner, []
+
+    def step(self, **kwargs):
+        self.calls.append(kwargs)
+        return self.inner.step(**kwargs)
+
+
+def test_unheard_teammates_are_stood_in_for_by_phantoms_at_their_slots():
+    agent = Agent(vehicle_id=1)
+    agent._controller = spy = _Recorder(agent._controller)
+    heard = (_plan(2, 0.0, [-4.0, 6.9, 8.9]),)
+    agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=heard, roster=ROSTER))
+    call = spy.calls[-1]
+    assert call["preferred_bearing_rad"] == pytest.approx(0.0)
+    by_id = {p.vehicle_id: p for p in call["teammates"]}
+    assert by_id[2] is heard[0]  # a heard teammate is used as it is
+    phantom = by_id[3]  # the unheard one stands at its slot, d_des from the estimate, h_des above it
+    expected = PERSON + [8.0 * math.cos(4.0 * math.pi / 3.0), 8.0 * math.sin(4.0 * math.pi / 3.0), 8.0]
+    np.testing.assert_allclose(phantom.positions_m[0], expected, atol=1e-9)
+    assert phantom.in_formation
+
+
+def test_no_phantoms_and_no_slot_when_every_teammate_is_heard():
+    agent = Agent(vehicle_id=1)
+    agent._controller = spy = _Recorder(agent._controller)
+    mates = (_plan(2, 0.0, [-4.0, 6.9, 8.9]), _plan(3, 0.0, [-4.0, -6.9, 8.9]))
+    agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=mates, roster=ROSTER))
+    assert spy.calls[-1]["preferred_bearing_rad"] is None
+    assert spy.calls[-1]["teammates"] == mates
+
+
+def test_a_mav_that_lost_the_person_turns_on_the_spot_to_search():
+    agent = Agent(vehicle_id=1)
+    yaws = []
+    for i in range(11):
+        t = i * 0.1
+        out = agent.tick(t, _inputs(t, role=AgentRole.FORMATION))
+        assert out.control.status.value == "no_person"
+        yaws.append(out.setpoint.yaw_rad)
+    # the command advances at 0.5 rad/s from the MAV's heading (pi), wrapped into [-pi, pi)
+    assert np.unwrap(yaws)[-1] - np.unwrap(yaws)[0] == pytest.approx(0.5, abs=1e-9)
+    assert yaws[0] == pytest.approx(-math.pi, abs=1e-9)
 
 
 def test_a_controller_exception_is_caught_counted_and_the_mav_holds_where_it_is():
