@@ -6,7 +6,7 @@ with a
 potential field: repulsion from the teammates' current positions and attraction to that goal point. They share
 no horizon plans: a `price` MAV uses only x(0) of each received plan, the teammate's position when it planned
 (the plan is still published, for the ground station's display). There is no angular-spacing term. skyring's
-field also repels from trees and virtual obstacles (surface distance, the same thresholds as eq. 15): without
+field also repels from trees and virtual obstacles (surface distance, the same thresholds as eq. 13): without
 it the baseline flew through the paper's trees, which says nothing about formation control.
 
 The field f (m/s^2, horizontal) is computed at the MAV's start position and then added to the MPC's inputs
@@ -62,7 +62,7 @@ def price_field(*, own_position_m: np.ndarray, goal_position_m: np.ndarray, team
     """(3,) the post-MPC field: repulsion from teammates and obstacles (cotangential, horizontal) plus goal
     attraction, clamped to fields.f_max_mps2.
 
-    teammate_positions_m: (J, 3) current positions; teammate_d_max_m: (J,) repulsion d_max of each (eq. 17).
+    teammate_positions_m: (J, 3) current positions; teammate_d_max_m: (J,) repulsion d_max of each (eq. 15).
     """
     own_xy = own_position_m[:2]
     force = np.zeros(2)

@@ -3,7 +3,7 @@
 The non-convex constraints of the formation (angular spacing 2 pi / K about the person, distance to teammates,
 trees, virtual obstacles and the person) enter the convex MPC as external accelerations f(n), one per horizon
 step n = 0..N, computed here from positions only. Equation numbers are those of the published paper (RA-L
-2019): eq. 12 (`act_force_mag`), 13 (`actforce`), 14 (`rep_dyn`), 15 (`rep_sta`), 16 (`clamping`), 17
+2019): eq. 10 (`act_force_mag`), 11 (`actforce`), 12 (`rep_dyn`), 13 (`rep_sta`), 14 (`clamping`), 15
 (`guarantee`).
 
 Every force is horizontal (z = 0), as in the authors' code. Positions are ENU metres; forces are m/s^2 because
@@ -38,14 +38,14 @@ class FieldParams:
     (K = 3, 5, 8) mean spacing error 3.4-5.1 deg and tree clearance >= 1.08 m.
 
     gain: G of the angular (active-tracking) field, the original's 50.
-    f_max_mps2: clamp on the norm of the total input (eq. 16); above the input authority (3 m/s^2 per axis) so
-        that a close teammate or trunk wins over the MPC, as the guarantee (eq. 17) asks.
+    f_max_mps2: clamp on the norm of the total input (eq. 14); above the input authority (3 m/s^2 per axis) so
+        that a close teammate or trunk wins over the MPC, as the guarantee (eq. 15) asks.
     freeze_fraction: the field's argument z rises linearly from (pi/2) * freeze_fraction at d_min to pi/2 at
         d_max and is held below d_min (METHOD.md's eps freeze): F is finite, saturated below d_min and
         strictly decreasing above. 0.2 rather than 0.1 halves the slope near d_min (10 Hz control of a
         squeezed pair).
 
-    tracking_c: c of eq. 12. 1 instead of the paper's 0.1 so that the force on the circle is not ten times
+    tracking_c: c of eq. 10. 1 instead of the paper's 0.1 so that the force on the circle is not ten times
         weaker than off it (the later original code also raised it to 1).
     tracking_min_fraction: the angular field's d_min as a fraction of its d_max = 2 pi / K. The original's
         d_min = 1 rad^2 on the squared angle inverts the thresholds for K >= 7; a fraction keeps
@@ -53,18 +53,18 @@ class FieldParams:
         (D = d_max - d_min), which stalled the prototype 10-50 deg short (Pitfall 3); 0.7 makes it steep:
         K = 2 then converges in 13 s instead of 21 s (0.5), and the final error is 0.1-1.3 deg instead of
         0.7-3.4 deg.
-    tracking_max_mps2: clamp on the norm of the active-tracking sum (eq. 13), below the input authority
+    tracking_max_mps2: clamp on the norm of the active-tracking sum (eq. 11), below the input authority
         (Pitfall 2). With the pass-through reference the MAV slides round the circle at about this value
         in m/s (the MPC's velocity damping is about 1 1/s): fast enough for every K, slow enough that
         neighbours never meet at speed.
 
-    teammate_d_min_m: d_min of eq. 17 = e_max + v_max dt (1 m way-point tracking error + 5 m/s * 0.1 s).
-    teammate_d_max_base_m: d_max for a fresh plan and zero covariances; eq. 17 adds both MAVs' covariance
+    teammate_d_min_m: d_min of eq. 15 = e_max + v_max dt (1 m way-point tracking error + 5 m/s * 0.1 s).
+    teammate_d_max_base_m: d_max for a fresh plan and zero covariances; eq. 15 adds both MAVs' covariance
         radii (square root of the largest eigenvalue) and teammate_speed_mps * (message age -
         teammate_age_grace_s). With the default 0.25 m^2 covariances a fresh d_max is 3.0 m, below the 3.12 m
         chord of 16 MAVs on an 8 m circle, so a finished formation feels no repulsion.
-    teammate_speed_mps: |v_max| of eq. 17, growing d_max with the plan's age.
-    covariance_radius_cap_m: largest covariance radius eq. 17 adds per MAV, so that a teammate reporting an
+    teammate_speed_mps: |v_max| of eq. 15, growing d_max with the plan's age.
+    covariance_radius_cap_m: largest covariance radius eq. 15 adds per MAV, so that a teammate reporting an
         absurd covariance is avoided widely but does not repel us from the whole arena.
     teammate_age_grace_s: plans are aligned to our clock by their stamp, so only age beyond one publish period
         is uncertain.
@@ -73,7 +73,7 @@ class FieldParams:
         original G = 50 the teammate field reached 8 m/s^2 already 0.7 m outside d_min, and a MAV squeezed
         between two neighbours (2 m apart at the start) was shot out at 4-5 m/s into the next one.
 
-    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 15 on the distance to the cylinder's SURFACE
+    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 13 on the distance to the cylinder's SURFACE
         (distance to the axis minus the radius), so thick and thin trunks keep the same clearance.
     obstacle_slide, slide_max_mps2: a tree on the circle blocks a MAV sliding along it with a purely
         tangential push (a local minimum that the approach-angle input does not address); obstacle_slide times
@@ -170,7 +170,7 @@ class TeammatePaths:
 
     positions_m: (J, N+1, 3) teammate j's planned position at our step n; vehicle_ids: (J,) int, used only to
     break exact ties; in_formation: (J,) bool, only these count for K and the angular term (all are avoided);
-    d_max_m: (J,) the teammate-repulsion d_max of eq. 17 for each (covariance radii and message age included).
+    d_max_m: (J,) the teammate-repulsion d_max of eq. 15 for each (covariance radii and message age included).
     rejected: plans dropped for non-finite or absurd numbers while building this.
     """
 
@@ -217,7 +217,7 @@ class ObstacleSet:
 class ExternalInputs:
     """The external inputs f(0..N) of one MAV, total and per term, each (N+1, 3) m/s^2 (z always 0).
 
-    total is what the MPC gets (eq. 16, clamped). The terms are before the total clamp (tracking and approach
+    total is what the MPC gets (eq. 14, clamped). The terms are before the total clamp (tracking and approach
     after their own clamps) and are for display and debugging. fault is True when the total was not finite and
     was replaced by zeros.
     """
@@ -267,7 +267,7 @@ def peak_gain(peak, *, d_min, d_max, freeze_fraction: float):
 
 
 def clamp_norm(vectors: np.ndarray, limit: float) -> np.ndarray:
-    """Scale every row of (..., k) whose norm exceeds limit down to norm limit (eq. 16's rule)."""
+    """Scale every row of (..., k) whose norm exceeds limit down to norm limit (eq. 14's rule)."""
     norms = np.sqrt(np.einsum("...i,...i->...", vectors, vectors))
     scale = np.minimum(1.0, limit / np.maximum(norms, 1e-300))
     return vectors * scale[..., None]
@@ -299,7 +299,7 @@ def _aligned(positions: np.ndarray, stamps: np.ndarray, plan_dts: np.ndarray, *,
 
 
 def covariance_radius_m(cov_m2: np.ndarray) -> float | np.ndarray:
-    """Radius of a position covariance for eq. 17: the square root of its largest eigenvalue (m).
+    """Radius of a position covariance for eq. 15: the square root of its largest eigenvalue (m).
 
     cov_m2: (3, 3), or (J, 3, 3) for J radii at once.
     """
@@ -316,7 +316,7 @@ def covariance_radius_m(cov_m2: np.ndarray) -> float | np.ndarray:
 def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, steps: int,
                    own_cov_radius_m: float, params: FieldParams,
                    current_position_only: bool = False) -> TeammatePaths:
-    """Align every teammate's latest plan to our horizon and compute its eq. 17 d_max.
+    """Align every teammate's latest plan to our horizon and compute its eq. 15 d_max.
 
     d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace)
     (each r_sigma capped at covariance_radius_cap_m): the guarantee's r_sigma_k + r_sigma_j + r_comm on top of
@@ -386,7 +386,7 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 
 def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.ndarray, mate_ids: np.ndarray,
                     own_id: int, team_size: int, d_des_m: float, params: FieldParams) -> np.ndarray:
-    """Active-tracking input (eqs. 12-13), (N+1, 2), before its clamp.
+    """Active-tracking input (eqs. 10-11), (N+1, 2), before its clamp.
 
     rel_xy (N+1, 2): own horizontal position minus the person's, rho (N+1,) its norm; mates_rel_xy (J, N+1,
     2): the in-formation teammates' positions minus the person's. For every teammate j the magnitude is
@@ -417,7 +417,7 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
 
 def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, peak: float, params: FieldParams,
                      tie_sign=1.0) -> np.ndarray:
-    """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eq. 14), (N+1, 2).
+    """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eq. 12), (N+1, 2).
 
     diff_xy (M, N+1, 2) from each source to us; dist (M, N+1) the distance the thresholds apply to; d_min a
     float, d_max and tie_sign floats or (M, 1) columns; the field equals `peak` at d_min. Sources never within
@@ -439,7 +439,7 @@ def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, pea
 def obstacle_inputs(*, diff_xy: np.ndarray, surface: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray,
                     person_xy: np.ndarray, obstacles: ObstacleSet, d_min: float, d_max: float,
                     person_d_min_m: float, active: np.ndarray, params: FieldParams) -> np.ndarray:
-    """Static and virtual obstacle input (eq. 15) with its radial slide, (N+1, 2).
+    """Static and virtual obstacle input (eq. 13) with its radial slide, (N+1, 2).
 
     diff_xy (M, N+1, 2) from each axis to us; surface (M, N+1) the distance to each cylinder's surface; active
     (M, N+1) masks cylinders the MAV is above. The repulsion F(surface) points away from the axis. The slide
@@ -500,7 +500,7 @@ def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, 
 def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarray, teammates: TeammatePaths,
                     obstacles: ObstacleSet, team_size: int, d_des_m: float, params: FieldParams,
                     terms: FieldTerms, own_id: int = 0, in_formation: bool = True) -> ExternalInputs:
-    """Every external input for horizon steps n = 0..N and their clamped total (eqs. 12-16).
+    """Every external input for horizon steps n = 0..N and their clamped total (eqs. 10-14).
 
     own_positions_m: (N+1, 3) our position at step n (the previous plan, the start position at n = 0);
     person_position_m: (3,) or (N+1, 3) the fused person estimate (per step when predicted over the horizon);
@@ -510,7 +510,7 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
 
     total = clamp_{f_max}(clamp_{tracking_max}(f_act) + f_dyn + f_sta + f_person +
     clamp_{approach_max}(f_ang)): METHOD.md Pitfall 2, the tangential steering terms are clamped below the
-    input authority on their own, the safety terms only by the total clamp (eq. 16). A non-finite total
+    input authority on their own, the safety terms only by the total clamp (eq. 14). A non-finite total
     becomes zero with fault=True.
     """
     own = np.asarray(own_positions_m, dtype=float)

@@ -20,7 +20,7 @@ were made by measurement in closed loop (tests/controller/test_closed_loop.py; p
    1.7 m after 60 s, and 3 MAVs ended 2.2 m off the circle. So the plan starts from the previous plan's
    state at `now` (what the autopilot is tracking) while the measured state is within the leash
    (`leash_position_m`, `leash_velocity_mps`); beyond it the start is pulled onto the leash towards the
-   measurement. With it the lone MAV settles in 7.5 s and the 3 in 16 s. The guarantee (eq. 17) already
+   measurement. With it the lone MAV settles in 7.5 s and the 3 in 16 s. The guarantee (eq. 15) already
    budgets this tracking error as e_max.
 3. Way-point: the plan's state `waypoint_step` steps ahead. Step 1 (0.1 s) is stable with the cascade
    above; steps 2 and more put the position set-point ahead of the vehicle by v k dt, which the cascade's

@@ -13,7 +13,7 @@ The limits come from the controller's own parameters (`limits_from_params`):
   least the fresh teammate-repulsion d_max (FieldParams.teammate_d_max_base_m plus both MAVs' default
   covariance radii, 3.0 m) so that the finished formation is outside each other's repulsion; and the
   person-repulsion threshold (FieldParams.person_d_min_fraction * d_des) must be at least the safety
-  distance d_min (FieldParams.teammate_d_min_m = e_max + v_max dt, paper eq. 17);
+  distance d_min (FieldParams.teammate_d_min_m = e_max + v_max dt, paper eq. 15);
 - d_des, from above: the circle about a person in the arena's centre must stay d_min
   (FieldParams.obstacle_d_min_m) inside the arena: d_des <= min half-width - d_min (18.5 m by default);
 - a virtual obstacle's centre must lie inside the arena; its radius must be positive and at most

@@ -111,9 +111,10 @@ def experiment(
             exp.with_overrides(exp.quick_protocol(f) if quick else exp.paper_protocol(f), overrides)
             for f in families
         ]
+        specs = exp.plan_runs(protocols, base_seed=seed)
+        exp.check_configs(specs)
     except ValueError as err:
-        raise typer.BadParameter(str(err), param_hint="FAMILY") from err
-    specs = exp.plan_runs(protocols, base_seed=seed)
+        raise typer.BadParameter(str(err)) from err
     jobs = jobs or os.cpu_count() or 1
     out.mkdir(parents=True, exist_ok=True)
     typer.echo(
@@ -124,7 +125,13 @@ def experiment(
 
     start = time.monotonic()
     progress = TextProgress(total=len(specs), stream=sys.stderr)
-    results = exp.run_all(specs, jobs=jobs, out_dir=out, resume=resume, progress=progress)
+    try:
+        results = exp.run_all(specs, jobs=jobs, out_dir=out, resume=resume, progress=progress)
+    except KeyboardInterrupt:
+        typer.echo(
+            f"\ninterrupted: the finished runs are kept under {out}; add --resume to continue", err=True
+        )
+        raise typer.Exit(code=130) from None
     wall = time.monotonic() - start
 
     summaries = [rep.summarize(p, results) for p in protocols]

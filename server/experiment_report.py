@@ -67,8 +67,8 @@ def flatten(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
 
 
 def metric_kind(metric: str) -> str:
-    """ "timing" for metrics measured with a clock (they vary between otherwise identical runs), "count" for
-    bookkeeping counters, "result" for everything else."""
+    """The kind of a metric: "timing" if measured with a clock (it varies between otherwise identical runs),
+    "count" for bookkeeping counters, "result" for everything else."""
     head = metric.split(".")[0]
     if head in TIMING_PREFIXES:
         return "timing"
@@ -160,19 +160,24 @@ class FamilySummary:
 
 
 def summarize(protocol: Protocol, results: Sequence[RunResult]) -> FamilySummary:
-    """Group `results` of `protocol`'s family by condition, keeping run order."""
+    """Group `results` of `protocol`'s family by condition. Each metric's values are in run-index order with
+    NaN for a failed run, so position i is run i of every condition (the pairs of the paired design)."""
     out = []
     for cond in protocol.conditions:
-        runs = sorted(
-            (r for r in results if r.spec.family == protocol.family and r.spec.condition == cond),
-            key=lambda r: r.spec.run_index,
-        )
-        ok = [r for r in runs if r.ok]
-        flats = [flatten(r.report.get("metrics", {})) for r in ok]
+        by_index = {
+            r.spec.run_index: r
+            for r in results
+            if r.spec.family == protocol.family and r.spec.condition == cond
+        }
+        flats = [
+            flatten(r.report.get("metrics", {})) if r is not None and r.ok else {}
+            for r in (by_index.get(i) for i in range(protocol.runs))
+        ]
         names = sorted({m for f in flats for m in f})
         values = {m: tuple(f.get(m, math.nan) for f in flats) for m in names}
+        ok = sum(1 for r in by_index.values() if r.ok)
         out.append(
-            ConditionSummary(condition=cond, values=values, runs_ok=len(ok), runs_failed=len(runs) - len(ok))
+            ConditionSummary(condition=cond, values=values, runs_ok=ok, runs_failed=len(by_index) - ok)
         )
     return FamilySummary(protocol=protocol, conditions=tuple(out))
 

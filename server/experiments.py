@@ -14,6 +14,7 @@ import importlib
 import json
 import multiprocessing
 import re
+import signal
 import time
 import traceback
 import zlib
@@ -313,6 +314,20 @@ def plan_runs(protocols: Sequence[Protocol], *, base_seed: int) -> list[RunSpec]
     ]
 
 
+def check_configs(specs: Sequence[RunSpec], *, simulator: str = SIMULATION_MODULE) -> None:
+    """Build every run's simulator config before anything runs, so a bad setting (say, a duration shorter
+    than the simulator's warm-up) is one clear error now rather than a failure in every worker.
+
+    Raises ValueError naming the family and condition.
+    """
+    sim = importlib.import_module(simulator)
+    for spec in specs:
+        try:
+            sim.SimConfig(**spec.config_fields())
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{spec.family} / {spec.condition.name}: {err}") from None
+
+
 # ---- execution ---------------------------------------------------------------------------------------------
 
 
@@ -389,7 +404,25 @@ def _fresh_process_pool(*, jobs: int, simulator: str) -> ProcessPoolExecutor:
     ctx = multiprocessing.get_context(method)
     if method == "forkserver":
         ctx.set_forkserver_preload([__name__, simulator])
-    return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, max_tasks_per_child=1)
+    return ProcessPoolExecutor(
+        max_workers=jobs, mp_context=ctx, max_tasks_per_child=1, initializer=_ignore_interrupts
+    )
+
+
+def _ignore_interrupts() -> None:
+    """Workers leave Ctrl-C to the parent, which stops them (see `_stop`)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop(executor: ProcessPoolExecutor) -> None:
+    """End the running runs now and drop the queued ones (on Ctrl-C): finished runs are already on disk.
+
+    The executor has no public way to end running tasks, so its workers are terminated first; the executor
+    then sees a broken pool, fails the remaining futures and shuts down cleanly.
+    """
+    for process in list((getattr(executor, "_processes", None) or {}).values()):
+        process.terminate()
+    executor.shutdown(wait=True, cancel_futures=True)
 
 
 def run_all(
@@ -421,18 +454,24 @@ def run_all(
             pending.append(i)
         else:
             finished(i, done)
-    if pending:
-        with _fresh_process_pool(jobs=min(jobs, len(pending)), simulator=simulator) as executor:
-            futures = {executor.submit(run_one, specs[i], simulator): i for i in pending}
-            remaining = set(futures)
-            while remaining:
-                done, remaining = wait(remaining, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    i = futures[fut]
-                    try:
-                        result = fut.result()
-                    except Exception as exc:  # the worker process itself died (e.g. killed, out of memory)
-                        result = RunResult(spec=specs[i], report=None, error=f"worker failed: {exc!r}")
-                    write_run(result, out_dir)
-                    finished(i, result)
+    if not pending:
+        return [results[i] for i in range(total)]
+    executor = _fresh_process_pool(jobs=min(jobs, len(pending)), simulator=simulator)
+    try:
+        futures = {executor.submit(run_one, specs[i], simulator): i for i in pending}
+        remaining = set(futures)
+        while remaining:
+            done, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+            for fut in done:
+                i = futures[fut]
+                try:
+                    result = fut.result()
+                except Exception as exc:  # the worker process itself died (e.g. killed, out of memory)
+                    result = RunResult(spec=specs[i], report=None, error=f"worker failed: {exc!r}")
+                write_run(result, out_dir)
+                finished(i, result)
+    except BaseException:
+        _stop(executor)
+        raise
+    executor.shutdown(wait=True)
     return [results[i] for i in range(total)]

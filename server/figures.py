@@ -26,9 +26,9 @@ LABEL_WIDTH_CHARS = 14  # tick labels wrap beyond this, so four method names fit
 # (metric, file stem, axis label) of the methods box plots.
 METHOD_PANELS: tuple[tuple[str, str, str], ...] = (
     (ERROR, "methods_tracking_error", "mean 3-D tracking error (m)"),
-    (UNCERTAINTY, "methods_uncertainty", "mean trace of fused position covariance (m$^2$)"),
-    (IN_FRAME, "methods_in_frame", "fraction of frames with the person fully in the image"),
-    (CENTER, "methods_center_distance", "mean distance of the person from the image centre (px)"),
+    (UNCERTAINTY, "methods_uncertainty", "mean trace of fused covariance (m$^2$)"),
+    (IN_FRAME, "methods_in_frame", "person fully in frame (fraction of frames)"),
+    (CENTER, "methods_center_distance", "mean distance from image centre (px)"),
 )
 # family -> (file stem, x-axis label) of the error-versus-sweep plots.
 SWEEP_PANELS: dict[str, tuple[str, str]] = {

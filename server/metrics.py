@@ -17,8 +17,11 @@ Names are a public interface (the JSON report, the experiments' tables): keep th
   airborne MAV to a trunk's surface, below its top), min_person_distance_m (horizontal, airborne MAVs), over
   every tick;
 - tick_ms {median, p99}: wall time of one agent tick (tracker + controller) of MAVs in formation;
-- realtime_factor: simulated seconds per wall-clock second of the whole run.
-A metric with no data is null.
+- realtime_factor: simulated seconds per wall-clock second, after the warm-up like everything else
+  (simulation, control and this bookkeeping included).
+Extras: estimate_fraction (MAV-ticks in formation with an estimate), detected_fraction (frames whose person
+was also not hidden by a trunk, so the detector reported it), frames, samples. A metric with no data is
+null.
 """
 
 from __future__ import annotations
@@ -60,14 +63,17 @@ class Recorder:
         self._obstacles = tuple(obstacles)
         self._samples: list[TickSample] = []
         self._in_frame: list[bool] = []
+        self._detected: list[bool] = []
         self._offsets: list[float] = []
         self._tick_s: list[float] = []
 
     def add_tick(self, sample: TickSample) -> None:
         self._samples.append(sample)
 
-    def add_frame(self, *, in_frame: bool, center_offset_px: float) -> None:
+    def add_frame(self, *, in_frame: bool, center_offset_px: float, detected: bool | None = None) -> None:
+        """One camera frame; detected defaults to in_frame (no occluder)."""
         self._in_frame.append(bool(in_frame))
+        self._detected.append(bool(in_frame if detected is None else detected))
         if in_frame and math.isfinite(center_offset_px):
             self._offsets.append(float(center_offset_px))
 
@@ -79,8 +85,11 @@ class Recorder:
 
     def metrics(self, *, sim_s: float, wall_s: float) -> dict[str, Any]:
         """The metrics dictionary (issue names first, then extras)."""
-        return compute_metrics(self._samples, in_frame=self._in_frame, offsets_px=self._offsets,
-                               tick_s=self._tick_s, obstacles=self._obstacles, sim_s=sim_s, wall_s=wall_s)
+        metrics = compute_metrics(self._samples, in_frame=self._in_frame, offsets_px=self._offsets,
+                                  tick_s=self._tick_s, obstacles=self._obstacles, sim_s=sim_s, wall_s=wall_s)
+        detected = np.asarray(self._detected, dtype=bool)
+        metrics["detected_fraction"] = _num(detected.mean()) if detected.size else None
+        return metrics
 
 
 def _num(x: float | np.floating | None) -> float | None:

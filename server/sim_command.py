@@ -61,7 +61,8 @@ def _choice(option: str, text: str, choices: tuple[str, ...]) -> str:
 
 
 def parse_options(*, vehicles: str, duration: str, seed: str, method: str, trees: str, comm_loss: str,
-                  person: str, warmup: str, rate: str, start: str, d_des: str, h_des: str) -> dict[str, Any]:
+                  person: str, warmup: str, rate: str, start: str, d_des: str, h_des: str,
+                  replan_rate: str = "0") -> dict[str, Any]:
     """SimConfig keyword arguments from the command line's text; raises _BadOption naming the option."""
     out: dict[str, Any] = {
         "vehicles": _int("--vehicles", vehicles, minimum=1),
@@ -82,6 +83,7 @@ def parse_options(*, vehicles: str, duration: str, seed: str, method: str, trees
     out["warmup_s"] = _float("--warmup", warmup, low=0.0)
     if out["warmup_s"] >= out["duration_s"]:
         raise _BadOption("--warmup", f"must be below --duration ({out['duration_s']:g} s), got {warmup}")
+    out["replan_hz"] = _float("--replan-rate", replan_rate, low=0.0, high=out["rate_hz"])
     if out["vehicles"] > 64:
         raise _BadOption("--vehicles", f"at most 64 vehicles, got {out['vehicles']}")
     return out
@@ -132,6 +134,8 @@ COMM_LOSS = _opt("--comm-loss", "P", "probability in [0, 1] that a message betwe
 PERSON = _opt("--person", "{paper,random,still}", "how the person moves")
 WARMUP = _opt("--warmup", "S", "metrics start after S seconds")
 RATE = _opt("--rate", "HZ", "control rate (the paper: 100 Hz)")
+REPLAN = _opt("--replan-rate", "HZ", "solve the MPC at most this often, following the plan in between "
+              "(0: every control tick, as the paper)")
 START = _opt("--start", "{ring,cluster}", "MAVs start at their roster slots or side by side")
 D_DES = _opt("--d-des", "M", "desired horizontal distance to the person")
 H_DES = _opt("--h-des", "M", "desired height above the person")
@@ -149,6 +153,7 @@ def sim(
     person: Annotated[str, PERSON] = "paper",
     warmup: Annotated[str, WARMUP] = "20",
     rate: Annotated[str, RATE] = "100",
+    replan_rate: Annotated[str, REPLAN] = "0",
     start: Annotated[str, START] = "ring",
     d_des: Annotated[str, D_DES] = "8",
     h_des: Annotated[str, H_DES] = "8",
@@ -158,7 +163,7 @@ def sim(
     try:
         options = parse_options(vehicles=vehicles, duration=duration, seed=seed, method=method, trees=trees,
                                 comm_loss=comm_loss, person=person, warmup=warmup, rate=rate, start=start,
-                                d_des=d_des, h_des=h_des)
+                                d_des=d_des, h_des=h_des, replan_rate=replan_rate)
     except _BadOption as exc:
         _fail(str(exc))
     if not headless:

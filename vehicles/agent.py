@@ -14,6 +14,11 @@ its own slot bearing as the terminal reference. So a team that cannot talk still
 out of its slot by a trunk is pushed back by its neighbours' phantoms before it reaches them: without any
 message, the slots are all a MAV can know about where its teammates are.
 
+Re-planning rate: by default the MPC is solved every control tick, as in the paper. With `replan_period_s`
+> 0 it is solved at most that often; in between, the set-point follows the latest plan (its state
+`waypoint_step` steps ahead of now, interpolated) with the yaw turned to the current person estimate, and the
+tracker still runs every tick. This is only for simulating large teams faster than real time.
+
 Lost person: with no estimate at all (the track expired, e.g. behind a trunk with no teammate to fill in),
 the controller holds the MAV where it is; the agent then turns it slowly on the spot (`search_yaw_rate_radps`)
 so that its camera sweeps the surroundings and finds the person again, instead of staring at the trunk.
@@ -57,11 +62,13 @@ class AgentParams:
     """plan_period_s: how often the plan is broadcast (10 Hz); teammate_timeout_s: a teammate's plan older
     than this is forgotten (it is then neither avoided nor spaced around); search_yaw_rate_radps: how fast a
     MAV that lost the person turns on the spot to look for it (0.5 rad/s: a full turn in 12.6 s, slow enough
-    for the 4 Hz detector to see the person in several frames of each turn)."""
+    for the 4 Hz detector to see the person in several frames of each turn); replan_period_s: 0 solves the MPC
+    every tick (the paper), > 0 at most this often (see the module docstring)."""
 
     plan_period_s: float = 0.1
     teammate_timeout_s: float = 3.0
     search_yaw_rate_radps: float = 0.5
+    replan_period_s: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,8 +145,11 @@ class Agent:
         self._tracker = PersonTracker(params.tracker)
         self._controller = FormationController(vehicle_id=self.vehicle_id, params=params)
         self._plans: dict[int, HorizonPlan] = {}
+        self._sorted_plans: tuple[HorizonPlan, ...] | None = None  # _plans by id, rebuilt after a change
         self._last_publish_s = -math.inf
         self._search: tuple[float, float] | None = None  # (time, yaw command) while searching
+        self._last_control: ControlOutput | None = None
+        self._last_person: PersonEstimate | None = None
         self._counts = dict.fromkeys(AgentCounters.__dataclass_fields__, 0)
 
     @property
@@ -148,8 +158,10 @@ class Agent:
 
     def teammate_plans(self, now_s: float) -> tuple[HorizonPlan, ...]:
         """The teammates' latest plans not older than teammate_timeout_s, by vehicle id."""
+        if self._sorted_plans is None:
+            self._sorted_plans = tuple(p for _, p in sorted(self._plans.items()))
         limit = now_s - self._ap.teammate_timeout_s
-        return tuple(p for _, p in sorted(self._plans.items()) if p.stamp_s >= limit)
+        return tuple(p for p in self._sorted_plans if p.stamp_s >= limit)
 
     def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
         """Run one control tick at now_s."""
@@ -162,14 +174,21 @@ class Agent:
                     counts["own_detections_fused"] += 1
             else:
                 counts["rejected_messages"] += 1
-        person = self._tracker.estimate(now_s)
+        following = inputs.role == AgentRole.FORMATION and inputs.own is not None and self._can_follow(now_s)
+        # Between re-plans the estimate of the last re-plan serves (0.1 s old at 10 Hz: a 7 cm walk).
+        person = self._last_person if following else self._tracker.estimate(now_s)
+        self._last_person = person
         teammates = self.teammate_plans(now_s)
         known = sum(1 for p in teammates if p.in_formation)
         own = inputs.own
         setpoint = control = plan = None
         fault = None
         used_slot = False
-        if own is not None and inputs.role == AgentRole.FORMATION:
+        if following:
+            control = self._last_control
+            plan = control.plan
+            setpoint = self._follow(now_s, plan, person)
+        elif own is not None and inputs.role == AgentRole.FORMATION:
             slot = dict(inputs.roster).get(self.vehicle_id)
             used_slot = slot is not None and known < len(inputs.roster) - 1
             if used_slot and person is not None:
@@ -203,6 +222,7 @@ class Agent:
                                     yaw_rad=own.yaw_rad)
             if used_slot:
                 counts["slot_ticks"] += 1
+            self._last_control = control
         elif own is not None and inputs.role == AgentRole.AIRBORNE:
             plan = hold_plan(state=own, params=self._params, in_formation=False)
         outbox: list[Message] = [d for d in inputs.detections
@@ -214,6 +234,26 @@ class Agent:
                             outbox=tuple(outbox), tracker=self._tracker.stats(),
                             counters=AgentCounters(**counts), teammates_known=known, used_slot=used_slot,
                             fault=fault)
+
+    def _can_follow(self, now_s: float) -> bool:
+        """True when this tick may follow the latest plan instead of solving the MPC again."""
+        last = self._last_control
+        return (self._ap.replan_period_s > 0.0 and last is not None and self._last_person is not None
+                and last.status == SolveStatus.SOLVED
+                and 0.0 <= now_s - last.plan.stamp_s < self._ap.replan_period_s - 1e-9)
+
+    def _follow(self, now_s: float, plan: HorizonPlan, person: PersonEstimate) -> Setpoint:
+        """The set-point of a tick between re-plans: the plan's state waypoint_step steps ahead of now."""
+        k = (now_s - plan.stamp_s) / plan.dt_s + self._params.reference.waypoint_step
+        k = min(max(k, 0.0), len(plan.positions_m) - 1.0)
+        lo = int(k)
+        hi = min(lo + 1, len(plan.positions_m) - 1)
+        a = k - lo
+        position = (1.0 - a) * plan.positions_m[lo] + a * plan.positions_m[hi]
+        velocity = (1.0 - a) * plan.velocities_mps[lo] + a * plan.velocities_mps[hi]
+        to_person = person.position_m - position
+        return Setpoint(stamp_s=now_s, position_m=position, velocity_mps=velocity,
+                        yaw_rad=math.atan2(to_person[1], to_person[0]))
 
     def _phantoms(self, now_s: float, person: PersonEstimate, inputs: AgentInputs,
                   heard: tuple[HorizonPlan, ...]) -> tuple[HorizonPlan, ...]:
@@ -254,5 +294,6 @@ class Agent:
             old = self._plans.get(msg.vehicle_id)
             if old is None or msg.stamp_s >= old.stamp_s:
                 self._plans[msg.vehicle_id] = msg
+                self._sorted_plans = None
         else:
             counts["rejected_messages"] += 1

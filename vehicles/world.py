@@ -161,10 +161,13 @@ class SimWorld:
             for body in self._bodies:
                 body.advance(t)
             self._t = t
-            self._truth = self._person.truth(t)
             for body in self._bodies:
                 if self._next_frame[body.vehicle_id] <= t + 1e-9:
+                    if self._truth.stamp_s != t:
+                        self._truth = self._person.truth(t)
                     self._capture(body, t)
+        if self._truth.stamp_s != now_s:
+            self._truth = self._person.truth(now_s)
 
     def _capture(self, body: Body, t: float) -> None:
         vid = body.vehicle_id

@@ -7,8 +7,10 @@ a larger fixed-seed profile (ORDERING_*) on which the paper's orderings must hol
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import os
 import struct
 import subprocess
 import sys
@@ -58,6 +60,21 @@ def test_obstacles_protocol_sweeps_0_to_20_obstacles_with_5_mavs_5_runs_of_180_s
     assert [dict(c.settings)["trees"] for c in p.conditions] == ["none", "5", "10", "15", "20"]
     assert {dict(c.settings)["vehicles"] for c in p.conditions} == {5}
     assert p.durations_s == (180.0,) * 5
+
+
+def test_methods_family_starts_every_team_side_by_side():
+    assert {dict(c.settings)["start"] for c in exp.paper_protocol("methods").conditions} == {"cluster"}
+
+
+def test_paper_protocol_runs_at_100_hz_and_the_quick_profile_at_10_hz():
+    for family in exp.FAMILIES:
+        assert exp.paper_protocol(family).rate_hz == 100.0
+        assert exp.quick_protocol(family).rate_hz == 10.0
+
+
+def test_rate_override_reaches_every_runs_simulator_config():
+    p = exp.with_overrides(exp.paper_protocol("commloss"), exp.ProfileOverrides(rate_hz=20.0))
+    assert {s.config_fields()["rate_hz"] for s in exp.plan_runs([p], base_seed=0)} == {20.0}
 
 
 def test_quick_profile_keeps_every_family_with_fewer_conditions_and_short_runs():
@@ -141,6 +158,22 @@ def test_derived_seed_is_a_pure_function_of_its_inputs():
 def test_run_files_are_laid_out_by_family_condition_and_run_index():
     spec = exp.plan_runs([exp.quick_protocol("commloss")], base_seed=0)[3]
     assert spec.relative_path() == Path("commloss/25-loss/run-001.json")
+
+
+def test_resume_reuses_a_finished_run_only_for_the_same_simulator_config(tmp_path):
+    spec = exp.plan_runs([exp.quick_protocol("obstacles")], base_seed=0)[0]
+    exp.write_run(
+        exp.RunResult(spec=spec, report={"config": {}, "metrics": {"in_frame_fraction": 0.5}}), tmp_path
+    )
+    loaded = exp.load_run(spec, tmp_path)
+    assert loaded.report["metrics"] == {"in_frame_fraction": 0.5}
+    assert exp.load_run(dataclasses.replace(spec, duration_s=spec.duration_s + 1.0), tmp_path) is None
+
+
+def test_resume_does_not_reuse_a_failed_run(tmp_path):
+    spec = exp.plan_runs([exp.quick_protocol("obstacles")], base_seed=0)[0]
+    exp.write_run(exp.RunResult(spec=spec, report=None, error="RuntimeError: boom"), tmp_path)
+    assert exp.load_run(spec, tmp_path) is None
 
 
 # ---- statistics --------------------------------------------------------------------------------------------
@@ -227,6 +260,22 @@ def test_methods_uncertainty_claim_fails_when_dqmpc_beats_active():
         exp.quick_protocol("methods"), lambda c, i: _metrics(error=1.0, cov=cov[dict(c.settings)["method"]])
     )
     assert verdicts[0] is False
+
+
+def test_uncertainty_evidence_counts_the_paired_runs_where_active_is_lower():
+    cov = {
+        ("price", 0): 2.0,
+        ("price", 1): 2.0,
+        ("dqmpc", 0): 1.0,
+        ("dqmpc", 1): 0.2,
+        ("active", 0): 0.5,
+        ("active", 1): 0.5,
+    }
+    p = exp.quick_protocol("methods")
+    results = _fake_results(p, lambda c, i: _metrics(error=1.0, cov=cov[(dict(c.settings)["method"], i)]))
+    evidence = rep.check_claims(rep.summarize(p, results))[0].evidence
+    assert "SE1 price 2.00 m^2 (SE3 active -75.0%, lower in 2 of 2 paired runs)" in evidence
+    assert "SE2 dqmpc 0.600 m^2 (SE3 active -16.7%, lower in 1 of 2 paired runs)" in evidence
 
 
 def test_in_frame_claim_fails_below_90_percent():
@@ -348,6 +397,7 @@ def _skyring(*args: str, out: Path) -> subprocess.CompletedProcess:
         capture_output=True,
         text=True,
         timeout=900,
+        env={**os.environ, "COLUMNS": "250"},  # error messages on one line
     )
 
 
@@ -378,6 +428,13 @@ def _section(report_md: str, family: str) -> str:
 
 def _untimed_metrics(path: Path) -> dict:
     return {k: v for k, v in json.loads(path.read_text())["metrics"].items() if not rep.is_timing(k)}
+
+
+def test_a_run_shorter_than_the_warm_up_is_refused_before_anything_runs(tmp_path):
+    proc = _skyring("methods", "--duration", "10", out=tmp_path)
+    assert proc.returncode == 2
+    assert "methods / SE1 price: warmup_s must be >= 0 and below duration_s (10.0)" in proc.stderr
+    assert not list(tmp_path.rglob("run-*.json"))
 
 
 @pytest.mark.slow

@@ -20,8 +20,9 @@ def _skyring(*args):
 
 def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
     path = tmp_path / "report.json"
-    done = _skyring("sim", "--headless", "--vehicles", "2", "--duration", "12", "--warmup", "10", "--rate", "10",
-                    "--seed", "3", "--trees", "none", "--person", "still", "--report", str(path))
+    done = _skyring("sim", "--headless", "--vehicles", "2", "--duration", "12", "--warmup", "10",
+                    "--rate", "10", "--seed", "3", "--trees", "none", "--person", "still",
+                    "--report", str(path))
     assert done.returncode == 0, done.stderr
     assert "tracking error" in done.stdout and "real-time factor" in done.stdout
     report = json.loads(path.read_text())
@@ -40,6 +41,7 @@ def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
     (["--trees", "forest"], "--trees"),
     (["--person", "dancing"], "--person"),
     (["--warmup", "90", "--duration", "60"], "--warmup"),
+    (["--replan-rate", "500"], "--replan-rate"),
 ])
 def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option):
     done = _skyring("sim", "--headless", *args)

@@ -33,12 +33,12 @@ def _sample(positions, *, estimates=None, traces=None, in_formation=None, t=0.0,
         cov_traces_m2=np.ones(k) if traces is None else traces, d_des_m=d_des, h_des_m=h_des)
 
 
-def _metrics(samples, frames=(), offsets=(), ticks=(), obstacles=(), sim_s=10.0, wall_s=2.0):
+def _metrics(samples, frames=(), offsets=(), ticks=(), obstacles=(), sim_s=10.0, wall_s=2.0, detected=None):
     rec = Recorder(obstacles=obstacles)
     for s in samples:
         rec.add_tick(s)
-    for f, o in zip(frames, offsets, strict=True):
-        rec.add_frame(in_frame=f, center_offset_px=o)
+    for i, (f, o) in enumerate(zip(frames, offsets, strict=True)):
+        rec.add_frame(in_frame=f, center_offset_px=o, detected=None if detected is None else detected[i])
     for t in ticks:
         rec.add_tick_time(t)
     return rec.metrics(sim_s=sim_s, wall_s=wall_s)
@@ -103,6 +103,13 @@ def test_in_frame_fraction_and_centre_offset_over_in_frame_frames():
     assert m["in_frame_fraction"] == pytest.approx(0.75)
     assert m["center_offset_px"] == {"mean": pytest.approx(30.0), "median": pytest.approx(20.0)}
     assert m["frames"] == 4
+
+
+def test_detected_fraction_leaves_out_frames_where_a_trunk_hid_the_person():
+    m = _metrics([_sample(_ring([0, 180]))], frames=[True, True, False, True], offsets=[0.0] * 4,
+                 detected=[True, False, False, True])
+    assert m["in_frame_fraction"] == pytest.approx(0.75)
+    assert m["detected_fraction"] == pytest.approx(0.5)
 
 
 def test_minimum_separation_clearance_and_person_distance():

@@ -86,6 +86,7 @@ def test_the_report_file_text_is_the_json_of_the_report(report):
     ({"method": "magic"}, "method"), ({"trees": "forest"}, "trees"), ({"person": "dancing"}, "person"),
     ({"warmup_s": 30.0, "duration_s": 20.0}, "warmup_s"), ({"rate_hz": 0.0}, "rate_hz"),
     ({"start": "line"}, "start"), ({"d_des_m": float("nan")}, "d_des_m"), ({"seed": -3}, "seed"),
+    ({"replan_hz": 200.0, "rate_hz": 100.0}, "replan_hz"), ({"replan_hz": -1.0}, "replan_hz"),
 ])
 def test_bad_configs_are_refused_naming_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field):

@@ -7,7 +7,7 @@ import pytest
 
 from controller.messages import Detection, HorizonPlan
 from controller.params import ControllerParams
-from vehicles.agent import Agent, AgentInputs, AgentRole, hold_plan
+from vehicles.agent import Agent, AgentInputs, AgentParams, AgentRole, hold_plan
 from vehicles.autopilot import AutopilotState, FlightMode
 
 PERSON = np.array([0.0, 0.0, 0.9])
@@ -183,6 +183,22 @@ def test_a_controller_exception_is_caught_counted_and_the_mav_holds_where_it_is(
     assert "boom" in out.fault
     np.testing.assert_allclose(out.setpoint.position_m, [8.0, 0.0, 8.9])
     np.testing.assert_allclose(out.setpoint.velocity_mps, 0.0)
+
+
+def test_with_a_replan_period_the_mpc_is_solved_that_often_and_followed_in_between():
+    agent = Agent(vehicle_id=1, agent_params=AgentParams(replan_period_s=0.1))
+    agent._controller = spy = _Recorder(agent._controller)
+    outs = []
+    for i in range(20):
+        t = round(i * 0.01, 6)
+        outs.append(agent.tick(t, _inputs(t, detections=(_det(1, t),) if i == 0 else ())))
+    assert len(spy.calls) == 2  # at 0.0 and 0.1 s
+    plan = outs[0].plan
+    # 0.05 s after the plan: its state waypoint_step (1) steps ahead of now, i.e. at step 1.5, interpolated
+    expected = 0.5 * (plan.positions_m[1] + plan.positions_m[2])
+    np.testing.assert_allclose(outs[5].setpoint.position_m, expected, atol=1e-9)
+    np.testing.assert_allclose(outs[5].setpoint.velocity_mps,
+                               0.5 * (plan.velocities_mps[1] + plan.velocities_mps[2]), atol=1e-9)
 
 
 def test_hold_plan_stays_at_the_reported_position():
