@@ -20,7 +20,7 @@ run: $(STAMP)
 	$(VENV)/bin/skyring serve
 
 test: $(STAMP) chromium
-	$(PY) -m pytest -q -ra
+	$(PY) -m pytest -q -ra -n auto --durations=15
 
 bench: $(STAMP)
 	$(VENV)/bin/skyring bench all
