@@ -33,6 +33,7 @@ from controller.fields import (
     covariance_radius_m,
     external_inputs,
     plan_path,
+    plan_velocities,
     teammate_paths,
 )
 from controller.messages import (
@@ -287,8 +288,13 @@ class FormationController:
         if self._prev_plan is not None:
             own_path = plan_path(self._prev_plan, now_s=tick.now_s, dt_s=dt, steps=self._steps)
             own_path = own_path + (tick.start_p - own_path[0])
+            own_vel = plan_velocities(self._prev_plan, now_s=tick.now_s, dt_s=dt, steps=self._steps)
         else:
             own_path = np.repeat(tick.start_p[None, :], self._steps, axis=0)
+            own_vel = np.repeat(tick.start_v[None, :], self._steps, axis=0)
+        # The braking margin needs the vehicle's velocity, not the plan's: the follower lags the plan.
+        measured_v = np.asarray(tick.own.velocity_mps, dtype=float)
+        own_vel = own_vel + ((measured_v if _finite(measured_v) else tick.start_v) - own_vel[0])
         person_p = np.asarray(tick.person.position_m, dtype=float)
         if prm.reference.predict_person:
             person_v = np.asarray(tick.person.velocity_mps, dtype=float)
@@ -296,7 +302,7 @@ class FormationController:
         ext = external_inputs(own_positions_m=own_path, person_position_m=person_p, teammates=mates,
                               obstacles=obstacle_set, team_size=1 + int(np.count_nonzero(mates.in_formation)),
                               d_des_m=formation.d_des_m, params=prm.fields, terms=self._terms,
-                              own_id=self._id, in_formation=tick.in_formation)
+                              own_id=self._id, in_formation=tick.in_formation, own_velocities_mps=own_vel)
         if ext.fault:
             self._counts["field_faults"] += 1
         return ext.total

@@ -11,6 +11,7 @@ from controller.fields import (
     FieldTerms,
     ObstacleSet,
     TeammatePaths,
+    braking_margin_m,
     cotangential_magnitude,
     covariance_radius_m,
     external_inputs,
@@ -261,6 +262,43 @@ def test_obstacle_thresholds_apply_to_the_surface_distance():
     np.testing.assert_array_equal(thick, 0.0)
 
 
+def test_braking_margin_is_the_stopping_distance_of_the_closing_speed():
+    diff = np.array([[[0.0, -4.0]] * 3])  # the source lies 4 m ahead (+y) at every step
+    velocities = np.array([[0.0, 3.0], [3.0, 0.0], [0.0, 10.0]])  # closing, passing, very fast
+    margin = braking_margin_m(diff_xy=diff, velocities_xy=velocities, brake_mps2=2.0, cap_m=4.0)
+    np.testing.assert_allclose(margin, [[2.25, 0.0, 4.0]])
+
+
+def test_obstacle_thresholds_move_out_by_the_braking_distance_when_closing():
+    own = held(np.array([8.0, 0.0, 8.9]))
+    tree = trees([8.0, 4.3])  # surface 4.0 m ahead (+y), beyond d_max = 3 m at rest
+
+    def obstacle_force(velocity):
+        vel = np.repeat(np.asarray(velocity, dtype=float)[None, :], STEPS, axis=0)
+        return external_inputs(own_positions_m=own, person_position_m=PERSON, teammates=mates(),
+                               obstacles=tree, team_size=1, d_des_m=8.0, params=DEFAULTS, terms=ACTIVE,
+                               own_velocities_mps=vel).obstacles[0, :2]
+
+    closing = obstacle_force([0.0, 3.0, 0.0])  # margin 2.25 m: effective surface 1.75 m
+    assert closing[1] < -3.0
+    np.testing.assert_array_equal(obstacle_force([0.0, 0.0, 0.0]), 0.0)
+    np.testing.assert_array_equal(obstacle_force([0.0, -3.0, 0.0]), 0.0)
+    np.testing.assert_array_equal(obstacle_force([3.0, 0.0, 0.0]), 0.0)
+
+
+def test_person_repulsion_never_pushes_the_mav_into_a_nearby_trunk():
+    # The MAV is 6.5 m from the person (inside d_min = 7 m), a trunk 1 m beyond it on the same line.
+    own = held(np.array([-6.5, 0.0, 8.9]))
+    trunk = trees([-7.8, 0.0])
+    f = external_inputs(own_positions_m=own, person_position_m=PERSON, teammates=mates(), obstacles=trunk,
+                        team_size=1, d_des_m=8.0, params=DEFAULTS, terms=ACTIVE)
+    alone = external_inputs(own_positions_m=own, person_position_m=PERSON, teammates=mates(),
+                            obstacles=trees(), team_size=1, d_des_m=8.0, params=DEFAULTS, terms=ACTIVE)
+    assert alone.person[0, 0] == pytest.approx(-8.0)  # the full peak, straight at where the trunk is
+    np.testing.assert_allclose(f.person[:, :2], 0.0, atol=1e-9)
+    assert np.all(f.total[:, 0] > 0.0)  # the trunk's repulsion wins
+
+
 def test_obstacle_blocking_the_circle_also_pushes_the_mav_outwards():
     own = on_circle(0.0)
     ahead = on_circle(12.0)[:2]  # a trunk on the circle, 1.7 m ahead counter-clockwise
@@ -359,6 +397,26 @@ def test_covariance_radius_is_the_root_of_the_largest_eigenvalue():
     tilted = rotation @ np.diag([9.0, 1.0, 4.0]) @ rotation.T
     assert covariance_radius_m(tilted) == pytest.approx(3.0)
     np.testing.assert_allclose(covariance_radius_m(np.stack([np.eye(3) * 0.25, tilted])), [0.5, 3.0])
+
+
+def test_covariance_radius_ignores_the_vertical_variance():
+    honest_gps = np.diag([0.25, 0.25, 1.0])
+    assert covariance_radius_m(honest_gps) == pytest.approx(0.5)
+    vertical_tilt = np.array([[0.25, 0.0, 0.4], [0.0, 0.16, 0.0], [0.4, 0.0, 4.0]])
+    assert covariance_radius_m(vertical_tilt) == pytest.approx(0.5)
+
+
+def test_honest_gps_covariance_keeps_a_k16_neighbour_outside_d_max():
+    chord_m = 2.0 * 8.0 * np.sin(np.pi / 16)
+    plan = straight_plan(stamp_s=5.0)
+    honest = HorizonPlan(vehicle_id=plan.vehicle_id, stamp_s=plan.stamp_s, dt_s=plan.dt_s,
+                         positions_m=plan.positions_m, velocities_mps=plan.velocities_mps,
+                         in_formation=True, position_cov_m2=np.diag([0.25, 0.25, 1.0]))
+    paths = teammate_paths([honest], now_s=5.0, dt_s=0.1, steps=16,
+                           own_cov_radius_m=covariance_radius_m(np.diag([0.25, 0.25, 1.0])),
+                           params=FieldParams())
+    assert paths.d_max_m[0] == pytest.approx(3.0)
+    assert paths.d_max_m[0] < chord_m - 0.1
 
 
 def test_teammate_plan_with_absurd_numbers_is_dropped_and_counted():

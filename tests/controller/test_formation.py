@@ -303,3 +303,15 @@ def test_random_garbage_never_yields_a_non_finite_way_point():
             assert_finite_output(out)
         stats = ctrl.stats
         assert stats.ticks == 60 == stats.solved + stats.braking + stats.no_person
+
+
+def test_a_mav_closing_on_a_trunk_at_speed_is_braked_before_the_trunks_d_max():
+    # The simulator's case: a MAV catching up at 2.9 m/s went through a trunk. The trunk's surface is 4 m
+    # ahead, beyond d_max = 3 m: at rest there is no obstacle input, at 3 m/s its braking distance (2.25 m)
+    # brings the trunk inside the field and the input opposes the motion from the first step.
+    own_p = on_circle(180.0)
+    trunk = Obstacle(obstacle_id="t", center_m=own_p[:2] + np.array([0.0, 4.3]), radius_m=0.3)
+    at_rest = step(controller(), state(own_p), obstacles=(trunk,))
+    closing = step(controller(), state(own_p, velocity=(0.0, 3.0, 0.0)), obstacles=(trunk,))
+    np.testing.assert_allclose(at_rest.external_inputs[:, 1], 0.0, atol=1e-12)
+    assert closing.external_inputs[0, 1] < -3.0
