@@ -54,8 +54,8 @@ class VehicleState:
 class Detection:
     """A world-frame measurement of the person's position by one MAV's camera and detector.
 
-    position_m: (3,) the person's measured centre; cov_m2: (3, 3) its covariance (paper eqs. 1-2, converted from
-    spherical camera coordinates); source_id: the MAV that made it; stamp_s: the image time.
+    position_m: (3,) the person's measured centre; cov_m2: (3, 3) its covariance (paper eqs. 1-2, converted
+    from spherical camera coordinates); source_id: the MAV that made it; stamp_s: the image time.
     """
 
     source_id: int
@@ -146,12 +146,14 @@ class Obstacle:
     def __post_init__(self) -> None:
         _freeze(self, "center_m", (2,))
         if not (np.isfinite(self.radius_m) and self.radius_m > 0):
-            raise ValueError(f"obstacle radius must be a positive finite number of metres, got {self.radius_m}")
+            raise ValueError(
+                f"obstacle radius must be a positive finite number of metres, got {self.radius_m}")
         if not (np.isfinite(self.height_m) and self.height_m > 0):
-            raise ValueError(f"obstacle height must be a positive finite number of metres, got {self.height_m}")
+            raise ValueError(
+                f"obstacle height must be a positive finite number of metres, got {self.height_m}")
 
 
-class SolveStatus(str, Enum):
+class SolveStatus(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports
     """What the controller did this tick."""
 
     SOLVED = "solved"  # the MPC solved; its plan is applied

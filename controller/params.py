@@ -18,7 +18,7 @@ from controller.reference import ReferenceParams
 from controller.tracker import TrackerParams
 
 
-class Method(str, Enum):
+class Method(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports
     """Formation method: the paper's (`active`) or one of its two baselines (METHOD.md "Baselines")."""
 
     ACTIVE = "active"

@@ -31,7 +31,6 @@ COMMANDS: dict[str, str] = {
     "sim": "server.sim_command:sim",
     "bench": "server.bench:bench",
     "experiment": "server.experiment_command:experiment",
-    "agent": "server.agent_command:agent",
     "replay": "server.replay_command:replay",
 }
 
@@ -46,11 +45,7 @@ def main() -> None:
     """Entry point: register the invoked command only (all of them for --help), then run typer."""
     wanted = [a for a in sys.argv[1:2] if a in COMMANDS]
     for name in wanted or list(COMMANDS):
-        try:
-            _register(name, COMMANDS[name])
-        except ModuleNotFoundError as exc:
-            if wanted or not exc.name or not exc.name.startswith("server."):
-                raise
+        _register(name, COMMANDS[name])
     app()
 
 

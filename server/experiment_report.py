@@ -38,6 +38,7 @@ METRIC_ORDER: tuple[str, ...] = (
     "distance_error_m",
     "height_error_m",
     "min_separation_m",
+    "min_believed_separation_m",
     "min_obstacle_clearance_m",
     "min_person_distance_m",
 )
@@ -50,6 +51,10 @@ IN_FRAME_MIN = 0.90  # paper: "almost 94 %" of frames with the person fully in t
 LOSS_TOLERANCE = 0.20  # "accurate up to 25 % loss": error within 20 % of the loss-free error
 OBSTACLE_TOLERANCE = 0.20  # "only slightly deteriorates": error within 20 % of the obstacle-free error
 LOSS_ACCURATE_PERCENT = 25.0
+# The controllers' teammate d_min (METHOD.md): a closer true approach is reported under each family's table.
+SEPARATION_MIN_M = 1.5
+SEPARATION = "min_separation_m"
+BELIEVED_SEPARATION = "min_believed_separation_m"
 
 
 def flatten(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
@@ -404,6 +409,25 @@ def _obstacles_claims(s: FamilySummary) -> list[ClaimCheck]:
     return [ClaimCheck(s.family, claim, evidence, bool(ratio <= 1.0 + OBSTACLE_TOLERANCE))]
 
 
+def separation_notes(s: FamilySummary) -> list[str]:
+    """Conditions where some run brought two MAVs closer than SEPARATION_MIN_M (true positions), with the
+    closest separation the controllers themselves saw (their self-localised positions) in those runs."""
+    notes = []
+    for c in s.conditions:
+        true = np.asarray(c.values.get(SEPARATION, ()), dtype=float)
+        believed = np.asarray(c.values.get(BELIEVED_SEPARATION, ()), dtype=float)
+        close = true < SEPARATION_MIN_M
+        if not close.any():
+            continue
+        seen = ""
+        if believed.shape == true.shape:
+            closest_believed = _fmt(float(believed[close].min()))
+            seen = f"; the closest the MAVs believed themselves in those runs: {closest_believed} m"
+        notes.append(f"{c.condition.name}: {int(close.sum())} of {len(true)} runs, closest "
+                     f"{_fmt(float(true.min()))} m{seen}")
+    return notes
+
+
 CLAIMS = {
     "methods": _methods_claims,
     "scalability": _scalability_claims,
@@ -552,6 +576,18 @@ def render_report(
         lines += ["", "The paper's claims against our numbers:", ""]
         for c in check_claims(s):
             lines.append(f"- **{c.verdict}**: {c.claim} Ours: {c.evidence}.")
+        notes = separation_notes(s)
+        if notes:
+            lines += [
+                "",
+                f"Safety: runs in which two MAVs came closer than {SEPARATION_MIN_M:g} m (the controllers' "
+                "d_min), measured between their true positions. The controllers keep apart the positions the "
+                "MAVs believe they are at; each MAV's self-localisation drifts (GPS random walk, METHOD.md), "
+                "so a true approach can be closer than any the team saw. Fly large teams with a larger d_des "
+                "or better localisation (RTK).",
+                "",
+                *(f"- {n}" for n in notes),
+            ]
     lines += [
         "",
         TIMING_HEADING,

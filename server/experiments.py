@@ -55,7 +55,7 @@ class Condition:
 @dataclass(frozen=True)
 class Protocol:
     """How one family is run: its conditions, each run's duration (one entry per run index, seconds) and the
-    control rate of every run (Hz; the paper's is 100)."""
+    control rate of every run (Hz; the paper's is 100, the default protocol's DEFAULT_RATE_HZ)."""
 
     family: str
     conditions: tuple[Condition, ...]
@@ -144,9 +144,13 @@ QUICK_LOSS_PERCENT: tuple[int, ...] = (0, 25, 100)
 QUICK_OBSTACLE_COUNTS: tuple[int, ...] = (0, 20)
 QUICK_RUNS = 2
 QUICK_DURATION_S = 30.0
-# The MPC's own step (dt = 0.1 s): it re-plans every step as at 100 Hz, only the way-point follower sees
-# set-points less often; ten times faster to simulate.
-QUICK_RATE_HZ = 10.0
+# The MPC's own step (dt = 0.1 s): the team re-plans every step of its horizon, only the way-point follower
+# sees set-points less often than at the paper's 100 Hz. Ten times faster to simulate, so the full default
+# protocol (306 runs, 43 020 simulated seconds) finishes in under an hour on two cores instead of about five
+# hours; on 18 paired runs of SE1 the mean tracking error was 0.445 m at 10 Hz and 0.446 m at 100 Hz and the
+# uncertainty 0.116 vs 0.111 m^2. `--rate 100` runs the paper's rate.
+DEFAULT_RATE_HZ = 10.0
+QUICK_RATE_HZ = DEFAULT_RATE_HZ
 PAPER_RATE_HZ = 100.0
 
 
@@ -215,15 +219,15 @@ def _obstacles_conditions(counts: Iterable[int]) -> tuple[Condition, ...]:
 def paper_protocol(family: str) -> Protocol:
     """The paper's protocol for `family`: SE1-SE4 with 5 MAVs, 30 runs (10 of 120 s, 20 of 180 s);
     3..16 MAVs with trees, 10 runs; 0..100 % link loss with 8 MAVs, 3 runs; 0..20 obstacles with 5 MAVs,
-    5 runs of 180 s."""
+    5 runs of 180 s. Control rate DEFAULT_RATE_HZ (see there; the paper's is PAPER_RATE_HZ)."""
     if family == "methods":
-        return Protocol(family, _methods_conditions(), (120.0,) * 10 + (180.0,) * 20, PAPER_RATE_HZ)
+        return Protocol(family, _methods_conditions(), (120.0,) * 10 + (180.0,) * 20, DEFAULT_RATE_HZ)
     if family == "scalability":
-        return Protocol(family, _scalability_conditions(PAPER_VEHICLE_COUNTS), (120.0,) * 10, PAPER_RATE_HZ)
+        return Protocol(family, _scalability_conditions(PAPER_VEHICLE_COUNTS), (120.0,) * 10, DEFAULT_RATE_HZ)
     if family == "commloss":
-        return Protocol(family, _commloss_conditions(PAPER_LOSS_PERCENT), (120.0,) * 3, PAPER_RATE_HZ)
+        return Protocol(family, _commloss_conditions(PAPER_LOSS_PERCENT), (120.0,) * 3, DEFAULT_RATE_HZ)
     if family == "obstacles":
-        return Protocol(family, _obstacles_conditions(PAPER_OBSTACLE_COUNTS), (180.0,) * 5, PAPER_RATE_HZ)
+        return Protocol(family, _obstacles_conditions(PAPER_OBSTACLE_COUNTS), (180.0,) * 5, DEFAULT_RATE_HZ)
     raise ValueError(f"unknown experiment family {family!r}; choose from {', '.join(FAMILIES)}")
 
 

@@ -3,12 +3,16 @@ before anything changes, and turns mission snapshots into the operator's view.
 
 The REST API and the viser GUI call the same methods here (it satisfies `webui.view.OperatorActions`), so
 there is one path for every command. Ticks and commands are serialised by one lock: viser calls back from
-its own threads, the API and the live runner from the asyncio loop. The mission may fly any list of
-autopilots (the embedded simulation or PX4 vehicles): nothing here knows which.
+its own threads, the API and the live runner from the asyncio loop. With a flight log attached
+(`attach_log`), every command with its outcome and a state sample every few ticks are recorded from here. The
+mission may fly any list of autopilots (the embedded simulation or PX4 vehicles): nothing here knows which.
 """
 
 from __future__ import annotations
 
+import functools
+import inspect
+import logging
 import math
 import threading
 from collections.abc import Callable
@@ -24,11 +28,40 @@ from server.commands import (
     check_obstacle,
     limits_from_params,
 )
+from server.flight_log import FlightLog
+from server.log_records import LogCommand, LogSample, sample_from, scalar
 from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
 from webui.view import CameraView, Range, SceneView, VehicleView
 
 FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)
+
+log = logging.getLogger(__name__)
+
+
+def _recorded(method):
+    """An operator command whose every call goes to the flight log with its outcome (accepted, or refused with
+    the message the operator saw). The GUI and the API call the same methods, so this is the one place every
+    command passes through; it holds the station lock so the log orders commands and ticks as they ran."""
+    signature = inspect.signature(method)
+
+    @functools.wraps(method)
+    def command(self: GroundStation, *args, **kwargs):
+        with self._lock:
+            if self._log is None:
+                return method(self, *args, **kwargs)
+            try:
+                result = method(self, *args, **kwargs)
+            except Exception as exc:
+                message = str(exc) if isinstance(exc, CommandError) else f"{type(exc).__name__}: {exc}"
+                self._record_command(method.__name__, lambda: signature.bind(self, *args, **kwargs),
+                                     accepted=False, message=message, result=None)
+                raise
+            self._record_command(method.__name__, lambda: signature.bind(self, *args, **kwargs),
+                                 accepted=True, message="", result=result)
+            return result
+
+    return command
 
 
 class GroundStation:
@@ -62,6 +95,7 @@ class GroundStation:
         self._refused = 0
         self._snapshot: MissionSnapshot | None = None
         self._view: SceneView | None = None
+        self._log: FlightLog | None = None
 
     # ---- time ---------------------------------------------------------------------------------------------
     @property
@@ -92,6 +126,32 @@ class GroundStation:
             self._time = now
             self._changed()
             self._mission.step(now)
+            if self._log is not None and self._log.sample_due(now):
+                self._log.record_sample(self._sample)
+
+    # ---- flight log ---------------------------------------------------------------------------------------
+    def attach_log(self, flight_log: FlightLog) -> None:
+        """Record every operator command and a state sample every `flight_log.sample_period_s` of mission time
+        (the first one now) to `flight_log`. Its owner closes it; a failing log never stops a tick."""
+        with self._lock:
+            self._log = flight_log
+            flight_log.record_sample(self._sample)
+
+    def _sample(self) -> LogSample:
+        return sample_from(self.snapshot(), self.scene_view())
+
+    def _record_command(self, name: str, bind: Callable[[], inspect.BoundArguments], *, accepted: bool,
+                        message: str, result: object) -> None:
+        try:
+            arguments = tuple((k, scalar(v)) for k, v in bind().arguments.items() if k != "self")
+            text = None if result is None else ",".join(map(str, result)) if isinstance(result, list) \
+                else str(result)
+            command = LogCommand(time_s=self._time, name=name, arguments=arguments, accepted=accepted,
+                                 message=message, result=text)
+        except Exception:  # noqa: BLE001 - the log must never change a command's outcome
+            log.exception("recording the %s command failed", name)
+            return
+        self._log.record_command(command)
 
     # ---- reading ------------------------------------------------------------------------------------------
     def snapshot(self) -> MissionSnapshot:
@@ -118,6 +178,7 @@ class GroundStation:
                 "controller_errors": c.controller_errors, "braking_ticks": c.braking_ticks}
 
     # ---- operator commands (webui.view.OperatorActions) ---------------------------------------------------
+    @_recorded
     def set_formation(self, *, d_des_m: float, h_des_m: float) -> None:
         """Set d_des and h_des for every MAV (CommandError with the allowed range if outside it)."""
         with self._lock:
@@ -125,6 +186,7 @@ class GroundStation:
                 d_des_m=d_des_m, h_des_m=h_des_m, limits=self._limits, team_size=self._team_size()))
             self._apply(lambda: self._mission.set_formation(formation))
 
+    @_recorded
     def add_obstacle(self, *, x_m: float, y_m: float, radius_m: float) -> str:
         """Add a virtual obstacle at ENU (x_m, y_m); returns its id ("v1", "v2", ...)."""
         with self._lock:
@@ -147,6 +209,7 @@ class GroundStation:
             self._next_obstacle += 1
             return obstacle.obstacle_id
 
+    @_recorded
     def remove_obstacle(self, obstacle_id: str) -> None:
         """Remove a virtual obstacle (UnknownTargetError if there is none by that id; trees stay)."""
         with self._lock:
@@ -160,12 +223,14 @@ class GroundStation:
                                           "the map: only virtual obstacles can be removed"))
             self._apply(lambda: self._mission.remove_obstacle(obstacle_id))
 
+    @_recorded
     def land(self, vehicle_id: int) -> None:
         """Land one MAV where it is; it leaves formation control until released."""
         with self._lock:
             self._vehicle(vehicle_id)
             self._apply(lambda: self._mission.land(vehicle_id))
 
+    @_recorded
     def land_all(self) -> list[int]:
         """Land every MAV that is taking off or flying; returns their ids."""
         with self._lock:
@@ -173,6 +238,7 @@ class GroundStation:
             self._apply(self._mission.land_all)
             return flying
 
+    @_recorded
     def release(self, vehicle_id: int) -> None:
         """Give a landed MAV back to the formation (it takes off again while formation is enabled).
 
@@ -190,6 +256,7 @@ class GroundStation:
                         f"d_des between {low:g} and {high:g} m (now {d_des:g} m): change d_des first"))
             self._apply(lambda: self._mission.release(vehicle_id))
 
+    @_recorded
     def set_formation_enabled(self, enabled: bool) -> None:
         """Start (True) or stop (False: every MAV holds position) formation control."""
         with self._lock:
@@ -197,6 +264,7 @@ class GroundStation:
                 self._refuse(CommandError(f"enabled must be true or false, got {enabled!r}"))
             self._apply(lambda: self._mission.set_formation_enabled(enabled))
 
+    @_recorded
     def shutdown(self) -> None:
         """Land every flying MAV, then run on_shutdown (called when the ground station stops)."""
         with self._lock:

@@ -16,6 +16,9 @@ Names are a public interface (the JSON report, the experiments' tables): keep th
 - min_separation_m (3-D, any two airborne MAVs), min_obstacle_clearance_m (horizontal distance of an
   airborne MAV to a trunk's surface, below its top), min_person_distance_m (horizontal, airborne MAVs), over
   every tick;
+- min_believed_separation_m: min_separation_m between the positions the MAVs believe they are at (their
+  self-localisation, GPS drift included), which is what the controllers keep apart; the gap to
+  min_separation_m is what the drift costs;
 - tick_ms {median, p99}: wall time of one agent tick (tracker + controller) of MAVs in formation;
 - realtime_factor: simulated seconds per wall-clock second, after the warm-up like everything else
   (simulation, control and this bookkeeping included).
@@ -42,7 +45,8 @@ class TickSample:
 
     positions_m (K, 3) true MAV positions; in_formation (K,) and in_air (K,) bool; person_m (3,) true centre;
     estimates_m (K, 3) fused estimates (NaN rows where none); cov_traces_m2 (K,) (NaN where none);
-    d_des_m, h_des_m: the operator's values at that tick.
+    d_des_m, h_des_m: the operator's values at that tick; believed_positions_m (K, 3): where the MAVs think
+    they are (self-localisation; None: the true positions).
     """
 
     t_s: float
@@ -54,6 +58,7 @@ class TickSample:
     cov_traces_m2: np.ndarray
     d_des_m: float
     h_des_m: float
+    believed_positions_m: np.ndarray | None = None
 
 
 class Recorder:
@@ -166,7 +171,7 @@ def compute_metrics(samples: Sequence[TickSample], *, in_frame: Sequence[bool], 
                     wall_s: float) -> dict[str, Any]:
     """Reduce the recorded run to the report's metrics (module docstring)."""
     errors, traces, spacing, dist_err, height_err = [], [], [], [], []
-    min_sep = min_clear = min_person = math.inf
+    min_sep = min_believed_sep = min_clear = min_person = math.inf
     with_estimate = formation_slots = 0
     for s in samples:
         f = s.in_formation
@@ -187,6 +192,8 @@ def compute_metrics(samples: Sequence[TickSample], *, in_frame: Sequence[bool], 
         air = s.positions_m[s.in_air]
         if len(air):
             min_sep = min(min_sep, min_pair_distance_m(air))
+            believed = s.positions_m if s.believed_positions_m is None else s.believed_positions_m
+            min_believed_sep = min(min_believed_sep, min_pair_distance_m(believed[s.in_air]))
             min_clear = min(min_clear, obstacle_clearance_m(air, obstacles))
             min_person = min(min_person, float(np.min(np.hypot(air[:, 0] - s.person_m[0],
                                                                 air[:, 1] - s.person_m[1]))))
@@ -206,6 +213,7 @@ def compute_metrics(samples: Sequence[TickSample], *, in_frame: Sequence[bool], 
         "tick_ms": _stats(ticks_ms, keys=("median", "p99")),
         "realtime_factor": _num(sim_s / wall_s) if wall_s > 0 else None,
         "estimate_fraction": _num(with_estimate / formation_slots) if formation_slots else None,
+        "min_believed_separation_m": _num(min_believed_sep),
         "frames": int(frames.size),
         "samples": len(samples),
     }

@@ -14,12 +14,15 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import numpy as np
 
 from controller.params import ControllerParams, Method
+from server.flight_log import DEFAULT_SAMPLE_RATE_HZ, FlightLog, utc_now_iso
 from server.ground_station import GroundStation
 from server.live import PaceStats, Urls, serve_station
+from server.log_records import LogHeader
 from vehicles.geodesy import GeodeticPoint, parse_geodetic
 from vehicles.links import SimLinks
 from vehicles.mission import Mission
@@ -102,23 +105,26 @@ async def serve_px4(urls: Sequence[str], *, origin: GeodeticPoint | None = None,
                     rate_hz: float = 20.0, host: str = "127.0.0.1", port: int = 8000, viser_port: int = 8080,
                     stop: asyncio.Event | None = None, on_ready: Callable[[Urls, object], None] | None = None,
                     on_station: Callable[[GroundStation, Px4Fleet], None] | None = None,
-                    handle_signals: bool = True) -> PaceStats:
+                    handle_signals: bool = True, flight_log: FlightLog | None = None) -> PaceStats:
     """Connect to every vehicle, serve the ground station until stopped, then land them and disconnect.
 
     on_station(station, fleet) is called once both exist (tests and tools use it). The landing asked for at
     shutdown is given time to reach PX4 before MAVSDK closes; from then on PX4's own failsafes
-    (COM_OBL_RC_ACT, NAV_DLL_ACT) cover any vehicle still in the air.
+    (COM_OBL_RC_ACT, NAV_DLL_ACT) cover any vehicle still in the air. flight_log (closed by its owner)
+    records the run from the moment the station exists.
     """
     fleet = await Px4Fleet.open(urls, origin=origin, config=config or Px4Config())
     try:
         station = build_px4_station(fleet, seed=seed, method=method, person=person, trees=trees,
                                     rate_hz=rate_hz)
+        if flight_log is not None:
+            station.attach_log(flight_log)
         if on_station is not None:
             on_station(station, fleet)
         return await serve_station(station, host=host, port=port, viser_port=viser_port, speed=1.0, stop=stop,
                                    on_ready=on_ready, handle_signals=handle_signals)
     finally:
-        settled = await asyncio.gather(*(a.settle(timeout_s=5.0) for a in fleet.autopilots))
+        settled = await fleet.settle(timeout_s=5.0)
         for a, ok in zip(fleet.autopilots, settled, strict=True):
             if not ok:
                 log.warning("vehicle %d: the landing command may not have reached PX4 (%s)", a.vehicle_id,
@@ -127,10 +133,14 @@ async def serve_px4(urls: Sequence[str], *, origin: GeodeticPoint | None = None,
 
 
 def run_px4(*, px4: Sequence[str], sitl: int, origin: str | None, seed: int, method: Method, person: str,
-            trees: str, rate_hz: float, host: str, port: int, viser_port: int, speed: float) -> None:
+            trees: str, rate_hz: float, host: str, port: int, viser_port: int, speed: float,
+            log_path: Path | None = None) -> None:
     """`skyring serve --px4 URL ... | --px4-sitl N [--origin lat,lon,alt]`: validate, connect, serve until
-    Ctrl-C / SIGTERM, land every MAV on the way out. `--px4` may be repeated or hold comma-separated URLs."""
+    Ctrl-C / SIGTERM, land every MAV on the way out. `--px4` may be repeated or hold comma-separated URLs.
+    log_path: the flight log to write (None: none), opened before connecting."""
     import typer
+
+    from server.serve_command import describe_log, open_log
 
     try:
         urls = px4_urls(urls=[u.strip() for item in px4 for u in item.split(",") if u.strip()], sitl=sitl)
@@ -148,14 +158,24 @@ def run_px4(*, px4: Sequence[str], sitl: int, origin: str | None, seed: int, met
         typer.echo(f"PX4 vehicles:   {', '.join(urls)}")
         typer.echo(f"operator view:  {urls_.operator}")
         typer.echo(f"API and docs:   {urls_.api}  ({urls_.api}docs)")
+        typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
+    flight_log = None if log_path is None else open_log(log_path, header=LogHeader(
+        command="serve --px4", vehicles=len(urls), seed=seed, method=Method(method).value, trees=trees,
+        person=person, rate_hz=rate_hz, speed=1.0, sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
+        started_utc=utc_now_iso(), vehicle_urls=tuple(urls)))
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
     try:
         stats = asyncio.run(serve_px4(urls, origin=reference, seed=seed, method=method, person=person,
                                       trees=trees, rate_hz=rate_hz, host=host, port=port,
-                                      viser_port=viser_port, on_ready=ready))
+                                      viser_port=viser_port, on_ready=ready, flight_log=flight_log))
     except Px4Error as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=1) from None
+    finally:
+        if flight_log is not None:
+            flight_log.close()
     typer.echo(f"stopped after {stats.ticks} control ticks")
+    if flight_log is not None:
+        typer.echo(describe_log(flight_log))

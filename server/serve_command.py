@@ -2,7 +2,9 @@
 
 Prints the operator URL (viser) and the API URL as soon as both listen. The station is built by
 `build_station`; other back-ends (PX4 through MAVSDK) build their autopilots and hand the same ground station
-a mission over them, then call `run`.
+a mission over them, then call `run`. Unless `--no-log`, the run is recorded in a flight log
+(`server.flight_log`; `skyring replay` plays it back), opened before anything flies so a log that cannot be
+written is refused up front rather than missed after the flight.
 """
 
 from __future__ import annotations
@@ -11,13 +13,45 @@ import asyncio
 import logging
 import math
 import time
-from typing import Annotated
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from controller.params import Method
 
+if TYPE_CHECKING:
+    from server.flight_log import FlightLog
+    from server.log_records import LogHeader
+
 log = logging.getLogger(__name__)
+
+
+def log_path_option(*, log_path: Path | None, no_log: bool) -> Path | None:
+    """Where `--log PATH` / `--no-log` put the flight log (None: no log); default runs/flight-<UTC>.jsonl."""
+    from server.flight_log import default_log_path
+
+    if log_path is not None and no_log:
+        raise typer.BadParameter("give either --log PATH or --no-log, not both", param_hint="--log")
+    return None if no_log else (log_path or default_log_path())
+
+
+def open_log(path: Path, *, header: LogHeader) -> FlightLog:
+    """Create the flight log at `path` and write its header; a path that cannot be written is refused."""
+    from server.flight_log import FlightLog
+
+    try:
+        return FlightLog.create(path, header=header)
+    except OSError as exc:
+        raise typer.BadParameter(f"cannot write the flight log {path}: {exc.strerror or exc} (choose another "
+                                 "path with --log PATH, or --no-log)", param_hint="--log") from None
+
+
+def describe_log(flight_log: FlightLog) -> str:
+    """One line about a closed flight log: where, what it holds, and any records lost."""
+    lost = (f"; {flight_log.write_errors} records could not be written" if flight_log.write_errors else "")
+    return (f"flight log:     {flight_log.name} ({flight_log.samples} samples, {flight_log.commands} "
+            f"commands{lost}); replay with: skyring replay {flight_log.name}")
 
 
 def build_station(*, vehicles: int, seed: int, method: Method, trees: str, person: str, rate_hz: float):
@@ -32,8 +66,10 @@ def build_station(*, vehicles: int, seed: int, method: Method, trees: str, perso
                          camera=camera_view(setup.world.camera))
 
 
-def run(station, *, host: str, port: int, viser_port: int, speed: float) -> None:
-    """Serve `station` until Ctrl-C / SIGTERM; the MAVs are told to land on the way out."""
+def run(station, *, host: str, port: int, viser_port: int, speed: float,
+        flight_log: FlightLog | None = None) -> None:
+    """Serve `station` until Ctrl-C / SIGTERM; the MAVs are told to land on the way out. `flight_log`, when
+    given, records the whole run and is closed here."""
     from server.live import Urls, serve_station
 
     def ready(urls: Urls, _ui: object) -> None:
@@ -44,12 +80,21 @@ def run(station, *, host: str, port: int, viser_port: int, speed: float) -> None
         typer.echo(f"operator view:  {urls.operator}")
         typer.echo(f"API and docs:   {urls.api}  ({urls.api}docs, state at {urls.api}api/state, stream at "
                    f"{urls.api.replace('http', 'ws', 1)}ws)")
+        typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
-    stats = asyncio.run(serve_station(station, host=host, port=port, viser_port=viser_port, speed=speed,
-                                      on_ready=ready))
+    if flight_log is not None:
+        station.attach_log(flight_log)
+    try:
+        stats = asyncio.run(serve_station(station, host=host, port=port, viser_port=viser_port, speed=speed,
+                                          on_ready=ready))
+    finally:
+        if flight_log is not None:
+            flight_log.close()
     typer.echo(f"stopped after {stats.ticks} control ticks ({stats.achieved_speed:.2f}x real time"
                + (f", fell behind {stats.lagged} times" if stats.lagged else "") + ")")
+    if flight_log is not None:
+        typer.echo(describe_log(flight_log))
 
 
 def serve(
@@ -71,6 +116,10 @@ def serve(
         help="fly N local PX4 SITL instances (udpin://0.0.0.0:14540+i)")] = 0,
     origin: Annotated[str | None, typer.Option(
         help="team frame origin 'lat,lon,alt' for PX4 vehicles (default: vehicle 1's home)")] = None,
+    log: Annotated[Path | None, typer.Option(
+        "--log", help="flight log to write (JSON Lines) [default: runs/flight-<UTC time>.jsonl]",
+        dir_okay=False)] = None,
+    no_log: Annotated[bool, typer.Option("--no-log", help="do not write a flight log")] = False,
 ) -> None:
     """Run the ground station over the embedded simulation: 3-D operator view, REST API and state stream."""
     if not 1 <= vehicles <= 16:
@@ -84,11 +133,13 @@ def serve(
     for name, value in (("--port", port), ("--viser-port", viser_port)):
         if not 0 <= value <= 65535:
             raise typer.BadParameter(f"must be a TCP port (0-65535), got {value}", param_hint=name)
+    log_path = log_path_option(log_path=log, no_log=no_log)
     if px4 or px4_sitl:
         from server.px4_station import run_px4  # MAVSDK loads only when PX4 vehicles are asked for
 
         run_px4(px4=px4 or [], sitl=px4_sitl, origin=origin, seed=seed, method=method, person=person,
-                trees=trees, rate_hz=rate, host=host, port=port, viser_port=viser_port, speed=speed)
+                trees=trees, rate_hz=rate, host=host, port=port, viser_port=viser_port, speed=speed,
+                log_path=log_path)
         return
     from vehicles.scenario import PERSON_MODES
     from vehicles.trees import TreeSpec
@@ -100,7 +151,20 @@ def serve(
     if person not in PERSON_MODES:
         raise typer.BadParameter(f"must be one of {', '.join(PERSON_MODES)}, got {person!r}",
                                  param_hint="--person")
-    station = build_station(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person,
-                            rate_hz=rate)
+    flight_log = None
+    if log_path is not None:
+        from server.flight_log import DEFAULT_SAMPLE_RATE_HZ, utc_now_iso
+        from server.log_records import LogHeader
+
+        flight_log = open_log(log_path, header=LogHeader(
+            command="serve", vehicles=vehicles, seed=seed, method=method.value, trees=trees, person=person,
+            rate_hz=rate, speed=speed, sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ, started_utc=utc_now_iso()))
+    try:
+        station = build_station(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person,
+                                rate_hz=rate)
+    except BaseException:
+        if flight_log is not None:
+            flight_log.close()
+        raise
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    run(station, host=host, port=port, viser_port=viser_port, speed=speed)
+    run(station, host=host, port=port, viser_port=viser_port, speed=speed, flight_log=flight_log)

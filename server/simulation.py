@@ -20,8 +20,9 @@ import numpy as np
 from controller.params import FormationParams, Method
 from server.metrics import Recorder, TickSample
 from vehicles.agent import AgentParams
-from vehicles.mission import MissionSnapshot, Phase
+from vehicles.mission import MissionSnapshot, Phase, VehicleSnapshot
 from vehicles.scenario import Scenario, SimSetup, build_sim
+from vehicles.sim_autopilot import SimAutopilot
 from vehicles.trees import TreeSpec
 
 TIMING_METRICS = ("tick_ms", "realtime_factor")
@@ -136,7 +137,16 @@ def _sample(setup: SimSetup, snap: MissionSnapshot, t: float) -> TickSample:
         t_s=t, positions_m=np.array([a.true_position_m for a in setup.autopilots]),
         in_formation=np.array([v.phase == Phase.FORMATION for v in snap.vehicles]),
         in_air=np.array([a.in_air for a in setup.autopilots]), person_m=person, estimates_m=estimates,
-        cov_traces_m2=traces, d_des_m=snap.formation.d_des_m, h_des_m=snap.formation.h_des_m)
+        cov_traces_m2=traces, d_des_m=snap.formation.d_des_m, h_des_m=snap.formation.h_des_m,
+        believed_positions_m=np.array([_believed(v, a) for v, a in zip(snap.vehicles, setup.autopilots,
+                                                                       strict=True)]))
+
+
+def _believed(vehicle: VehicleSnapshot, autopilot: SimAutopilot) -> np.ndarray:
+    """(3,) where the MAV thinks it is: its autopilot's self-localised position (the truth before the first
+    telemetry)."""
+    state = vehicle.autopilot
+    return np.asarray(state.position_m if state is not None else autopilot.true_position_m, dtype=float)
 
 
 def run_simulation(config: SimConfig, *, progress: Callable[[float], None] | None = None) -> SimReport:

@@ -16,7 +16,7 @@ import numpy as np
 from controller.messages import _freeze
 
 
-class FlightMode(str, Enum):
+class FlightMode(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports
     """The autopilot's flight mode as skyring understands it (PX4 custom modes map onto these)."""
 
     UNKNOWN = "unknown"
@@ -66,7 +66,8 @@ class AutopilotState:
 
 @dataclass(frozen=True, eq=False)
 class Setpoint:
-    """An offboard set-point: ENU position_m (3,), velocity_mps (3,) feed-forward, yaw_rad (ENU), made at stamp_s."""
+    """An offboard set-point: ENU position_m (3,), velocity_mps (3,) feed-forward, yaw_rad (ENU), made at
+    stamp_s."""
 
     stamp_s: float
     position_m: np.ndarray

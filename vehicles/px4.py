@@ -689,16 +689,9 @@ class Px4Fleet:
             a.start()
         return cls(autopilots=autopilots, reference=reference)
 
-    async def settle(self, timeout_s: float = 5.0) -> bool:
-        """Wait until every request made so far was acted on and no command is in flight (e.g. the landing
-        asked for at shutdown has reached PX4); False if that took longer than timeout_s."""
-        deadline = self._clock() + timeout_s
-        await asyncio.sleep(0)  # let requests handed over from other threads arrive
-        while self._supervisor.pending or self._executing:
-            if self._clock() > deadline or not self._tasks:
-                return False
-            await asyncio.sleep(0.02)
-        return True
+    async def settle(self, timeout_s: float = 5.0) -> list[bool]:
+        """`Px4Autopilot.settle` on every vehicle at once; one flag per vehicle, in the fleet's order."""
+        return list(await asyncio.gather(*(a.settle(timeout_s=timeout_s) for a in self.autopilots)))
 
     async def close(self) -> None:
         await asyncio.gather(*(a.close() for a in self.autopilots), return_exceptions=True)

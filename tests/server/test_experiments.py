@@ -66,10 +66,15 @@ def test_methods_family_starts_every_team_side_by_side():
     assert {dict(c.settings)["start"] for c in exp.paper_protocol("methods").conditions} == {"cluster"}
 
 
-def test_paper_protocol_runs_at_100_hz_and_the_quick_profile_at_10_hz():
+def test_default_and_quick_profiles_run_at_the_mpcs_10_hz_step():
     for family in exp.FAMILIES:
-        assert exp.paper_protocol(family).rate_hz == 100.0
+        assert exp.paper_protocol(family).rate_hz == 10.0
         assert exp.quick_protocol(family).rate_hz == 10.0
+
+
+def test_rate_100_runs_the_papers_control_rate():
+    p = exp.with_overrides(exp.paper_protocol("methods"), exp.ProfileOverrides(rate_hz=exp.PAPER_RATE_HZ))
+    assert {s.config_fields()["rate_hz"] for s in exp.plan_runs([p], base_seed=0)} == {100.0}
 
 
 def test_rate_override_reaches_every_runs_simulator_config():
@@ -286,6 +291,27 @@ def test_in_frame_claim_fails_below_90_percent():
 def test_scalability_claim_agrees_when_error_falls_with_team_size():
     p = exp.paper_protocol("scalability")
     assert _verdicts(p, lambda c, i: _metrics(error=2.0 / math.sqrt(c.x))) == [True]
+
+
+def test_separation_notes_name_the_conditions_where_mavs_came_closer_than_d_min():
+    p = exp.quick_protocol("scalability")
+
+    def metrics_of(c, i):
+        close = c.x == 16.0 and i == 1
+        return {**_metrics(error=1.0), "min_separation_m": 0.9 if close else 2.5,
+                "min_believed_separation_m": 2.1 if close else 3.0}
+
+    notes = rep.separation_notes(rep.summarize(p, _fake_results(p, metrics_of)))
+    assert notes == [
+        "16 MAVs: 1 of 2 runs, closest 0.900 m; "
+        "the closest the MAVs believed themselves in those runs: 2.10 m"
+    ]
+
+
+def test_separation_notes_are_empty_when_every_run_kept_d_min():
+    p = exp.quick_protocol("scalability")
+    results = _fake_results(p, lambda c, i: {**_metrics(error=1.0), "min_separation_m": 1.5})
+    assert rep.separation_notes(rep.summarize(p, results)) == []
 
 
 def test_scalability_claim_fails_when_error_grows_with_team_size():

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def start_serve(*args: str) -> subprocess.Popen:
-    command = [sys.executable, "-m", "server.cli", "serve", "--viser-port", "0", *args]
+    command = [sys.executable, "-m", "server.cli", "serve", "--viser-port", "0", "--no-log", *args]
     return subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
 

@@ -140,3 +140,19 @@ def test_metrics_without_data_are_null():
     assert m["tracking_error_m"] == {"mean": None, "median": None, "p90": None}
     assert m["in_frame_fraction"] is None and m["spacing_error_deg"] is None
     assert m["min_separation_m"] is None and m["min_obstacle_clearance_m"] is None
+
+
+def test_believed_separation_is_measured_between_the_self_localised_positions():
+    truth = np.array([[0.0, 0.0, 8.0], [1.0, 0.0, 8.0]])
+    believed = np.array([[-0.5, 0.0, 8.0], [1.5, 0.0, 8.0]])
+    sample = TickSample(t_s=0.0, positions_m=truth, in_formation=np.ones(2, bool), in_air=np.ones(2, bool),
+                        person_m=PERSON, estimates_m=np.tile(PERSON, (2, 1)), cov_traces_m2=np.ones(2),
+                        d_des_m=8.0, h_des_m=8.0, believed_positions_m=believed)
+    m = _metrics([sample])
+    assert m["min_separation_m"] == pytest.approx(1.0)
+    assert m["min_believed_separation_m"] == pytest.approx(2.0)
+
+
+def test_believed_separation_defaults_to_the_true_one_without_self_localisation():
+    m = _metrics([_sample(_ring([0.0, 20.0]))])
+    assert m["min_believed_separation_m"] == pytest.approx(m["min_separation_m"])
