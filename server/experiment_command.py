@@ -88,7 +88,7 @@ def experiment(
     rate: Annotated[
         float | None,
         typer.Option(min=1.0, max=1000.0,
-                     help="control rate, Hz (default 10, the MPC's step; the paper's 100: ~6x slower)"),
+                     help="control rate, Hz (default 10, the MPC's step; the paper's 100: ~7x slower)"),
     ] = None,
     seed: Annotated[int, typer.Option(min=0, help="base seed; each run's seed is derived from it")] = 0,
     jobs: Annotated[

@@ -581,10 +581,10 @@ def render_report(
             lines += [
                 "",
                 f"Safety: runs in which two MAVs came closer than {SEPARATION_MIN_M:g} m (the controllers' "
-                "d_min), measured between their true positions. The controllers keep apart the positions the "
-                "MAVs believe they are at; each MAV's self-localisation drifts (GPS random walk, METHOD.md), "
-                "so a true approach can be closer than any the team saw. Fly large teams with a larger d_des "
-                "or better localisation (RTK).",
+                "d_min) between their true positions, and in those runs the closest approach between the "
+                "positions the MAVs believed they were at (self-localisation with GPS drift, METHOD.md: what "
+                "the controllers keep apart). A believed approach below d_min too means the controllers "
+                "themselves let the MAVs close in; a believed approach above it means the drift did.",
                 "",
                 *(f"- {n}" for n in notes),
             ]
@@ -594,7 +594,9 @@ def render_report(
         "",
         "Measured with a clock: these numbers change from run to run and machine to machine.",
         "",
-        f"Total wall time: {wall_time_s:.1f} s.",
+        f"Wall time of the command that wrote this report: {wall_time_s:.1f} s. The runs' own wall times add "
+        f"up to {sum(r.wall_s for r in results):.1f} s (runs execute in parallel; a run reused with --resume "
+        "keeps the time it took then).",
         "",
         timing_table(summaries, results),
         "",
