@@ -283,6 +283,17 @@ def test_uncertainty_evidence_counts_the_paired_runs_where_active_is_lower():
     assert "SE2 dqmpc 0.600 m^2 (SE3 active -16.7%, lower in 1 of 2 paired runs)" in evidence
 
 
+def test_se4_claim_shows_what_avoiding_obstacles_costs_against_se3():
+    cov = {"none": 0.5, "paper": 0.7}
+    p = exp.quick_protocol("methods")
+    results = _fake_results(
+        p, lambda c, i: _metrics(error=1.0, cov=cov[dict(c.settings)["virtual_obstacles"]])
+    )
+    evidence = rep.check_claims(rep.summarize(p, results))[1].evidence
+    assert evidence.endswith("what avoiding the obstacles costs SE4 against SE3: spacing_error_deg 7.00 vs "
+                             "5.00 deg, cov_trace_m2.mean 0.700 vs 0.500 m^2")
+
+
 def test_in_frame_claim_fails_below_90_percent():
     verdicts = _verdicts(exp.quick_protocol("methods"), lambda c, i: _metrics(error=1.0, in_frame=0.89))
     assert verdicts[2] is False
