@@ -180,8 +180,9 @@ class FlightLog:
                 # a record after a failed write starts on a fresh line: the failed one may have been cut short
                 self._sink.write(b"\n" + data if self._broken_line else data)
                 self._broken_line = False
-                if self._clock() - self._last_sync >= SYNC_PERIOD_S:
-                    self._last_sync = self._clock()
+                now = self._clock()
+                if now - self._last_sync >= SYNC_PERIOD_S:
+                    self._last_sync = now
                     self._sink.sync()
             except OSError as exc:
                 if raise_errors:

@@ -180,6 +180,13 @@ def _finite(*values: float) -> bool:
     return all(v is not None and math.isfinite(v) for v in values)
 
 
+def _geodetic(message) -> GeodeticPoint | None:
+    """A MAVSDK position or home message (latitude_deg, longitude_deg, absolute_altitude_m) as a point; None
+    when a coordinate is not finite."""
+    lat, lon, alt = message.latitude_deg, message.longitude_deg, message.absolute_altitude_m
+    return GeodeticPoint(lat, lon, alt) if _finite(lat, lon, alt) else None
+
+
 @dataclass(frozen=True)
 class Px4Status:
     """The back-end's own view of one vehicle, for the ground station and logs.
@@ -512,9 +519,10 @@ class Px4Autopilot:
         return True
 
     def _on_position(self, p, now: float) -> bool:
-        if not _finite(p.latitude_deg, p.longitude_deg, p.absolute_altitude_m):
+        point = _geodetic(p)
+        if point is None:
             return False
-        self._cache.position = GeodeticPoint(p.latitude_deg, p.longitude_deg, p.absolute_altitude_m)
+        self._cache.position = point
         return True
 
     def _on_attitude(self, a, now: float) -> bool:
@@ -554,9 +562,10 @@ class Px4Autopilot:
         return True
 
     def _on_home(self, home, now: float) -> bool:
-        if not _finite(home.latitude_deg, home.longitude_deg, home.absolute_altitude_m):
+        point = _geodetic(home)
+        if point is None:
             return False
-        self._cache.home = GeodeticPoint(home.latitude_deg, home.longitude_deg, home.absolute_altitude_m)
+        self._cache.home = point
         return True
 
     def _on_raw_gps(self, gps, now: float) -> bool:
