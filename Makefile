@@ -27,6 +27,7 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check controller vehicles server webui tests
+	$(VENV)/bin/ruff format --check controller vehicles server webui tests
 
 clean:
 	rm -rf $(VENV) .pytest_cache

@@ -46,19 +46,28 @@ class PriceParams:
             raise ValueError("PriceParams.input_weight must be > 0")
 
 
-def _repulsion(diff: np.ndarray, dist: np.ndarray, *, d_min: float, d_max, peak: float,
-               fields: FieldParams) -> np.ndarray:
+def _repulsion(
+    diff: np.ndarray, dist: np.ndarray, *, d_min: float, d_max, peak: float, fields: FieldParams
+) -> np.ndarray:
     """(2,) sum of cotangential repulsions F(dist) (J,) along diff (J, 2)."""
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=fields.freeze_fraction)
-    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain,
-                                 freeze_fraction=fields.freeze_fraction)
+    mag = cotangential_magnitude(
+        dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=fields.freeze_fraction
+    )
     norm = np.sqrt(np.einsum("ji,ji->j", diff, diff))
     return (mag[:, None] * diff / np.where(norm > 1e-9, norm, np.inf)[:, None]).sum(axis=0)
 
 
-def price_field(*, own_position_m: np.ndarray, goal_position_m: np.ndarray, teammate_positions_m: np.ndarray,
-                teammate_d_max_m: np.ndarray, obstacles: ObstacleSet, fields: FieldParams,
-                params: PriceParams) -> np.ndarray:
+def price_field(
+    *,
+    own_position_m: np.ndarray,
+    goal_position_m: np.ndarray,
+    teammate_positions_m: np.ndarray,
+    teammate_d_max_m: np.ndarray,
+    obstacles: ObstacleSet,
+    fields: FieldParams,
+    params: PriceParams,
+) -> np.ndarray:
     """(3,) the post-MPC field: repulsion from teammates and obstacles (cotangential, horizontal) plus goal
     attraction, clamped to fields.f_max_mps2.
 
@@ -69,15 +78,26 @@ def price_field(*, own_position_m: np.ndarray, goal_position_m: np.ndarray, team
     if len(teammate_positions_m):
         diff = own_xy[None, :] - teammate_positions_m[:, :2]
         d_min = fields.teammate_d_min_m
-        force += _repulsion(diff, np.sqrt(np.einsum("ji,ji->j", diff, diff)), d_min=d_min,
-                            d_max=np.maximum(teammate_d_max_m, d_min + 1e-3), peak=fields.teammate_peak_mps2,
-                            fields=fields)
+        force += _repulsion(
+            diff,
+            np.sqrt(np.einsum("ji,ji->j", diff, diff)),
+            d_min=d_min,
+            d_max=np.maximum(teammate_d_max_m, d_min + 1e-3),
+            peak=fields.teammate_peak_mps2,
+            fields=fields,
+        )
     if obstacles.count:
         diff = own_xy[None, :] - obstacles.centers_m
         surface = np.sqrt(np.einsum("ji,ji->j", diff, diff)) - obstacles.radii_m
         below = own_position_m[2] < obstacles.heights_m + fields.obstacle_d_min_m
-        force += _repulsion(diff[below], surface[below], d_min=fields.obstacle_d_min_m,
-                            d_max=fields.obstacle_d_max_m, peak=fields.obstacle_peak_mps2, fields=fields)
+        force += _repulsion(
+            diff[below],
+            surface[below],
+            d_min=fields.obstacle_d_min_m,
+            d_max=fields.obstacle_d_max_m,
+            peak=fields.obstacle_peak_mps2,
+            fields=fields,
+        )
     pull = params.attraction_gain_per_s2 * (goal_position_m[:2] - own_xy)
     force += clamp_norm(pull, params.attraction_max_mps2)
     force = clamp_norm(force, fields.f_max_mps2)

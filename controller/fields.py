@@ -195,8 +195,9 @@ class TeammatePaths:
 
     @classmethod
     def empty(cls, steps: int, *, rejected: int = 0) -> TeammatePaths:
-        return cls(np.zeros((0, steps, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool), np.zeros(0),
-                   rejected)
+        return cls(
+            np.zeros((0, steps, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool), np.zeros(0), rejected
+        )
 
     @property
     def count(self) -> int:
@@ -218,8 +219,11 @@ class ObstacleSet:
         kept = [o for o in obstacles if float(np.abs(o.center_m).max()) < SANE_ABS]
         if not kept:
             return cls(np.zeros((0, 2)), np.zeros(0), np.zeros(0))
-        return cls(np.array([o.center_m for o in kept]), np.array([o.radius_m for o in kept]),
-                   np.array([o.height_m for o in kept]))
+        return cls(
+            np.array([o.center_m for o in kept]),
+            np.array([o.radius_m for o in kept]),
+            np.array([o.height_m for o in kept]),
+        )
 
     @property
     def count(self) -> int:
@@ -293,18 +297,31 @@ def plan_path(plan: HorizonPlan, *, now_s: float, dt_s: float, steps: int) -> np
     The plan is shifted by its age and linearly interpolated; before its x(0) and beyond its last state it is
     held (a plan older than its horizon gives the teammate's last planned position).
     """
-    return _aligned(plan.positions_m[None], np.array([plan.stamp_s]), np.array([plan.dt_s]),
-                    now_s=now_s, dt_s=dt_s, steps=steps)[0]
+    return _aligned(
+        plan.positions_m[None],
+        np.array([plan.stamp_s]),
+        np.array([plan.dt_s]),
+        now_s=now_s,
+        dt_s=dt_s,
+        steps=steps,
+    )[0]
 
 
 def plan_velocities(plan: HorizonPlan, *, now_s: float, dt_s: float, steps: int) -> np.ndarray:
     """(steps, 3) a plan's velocities at our times now_s + n dt_s, aligned as in `plan_path`."""
-    return _aligned(plan.velocities_mps[None], np.array([plan.stamp_s]), np.array([plan.dt_s]),
-                    now_s=now_s, dt_s=dt_s, steps=steps)[0]
+    return _aligned(
+        plan.velocities_mps[None],
+        np.array([plan.stamp_s]),
+        np.array([plan.dt_s]),
+        now_s=now_s,
+        dt_s=dt_s,
+        steps=steps,
+    )[0]
 
 
-def _aligned(positions: np.ndarray, stamps: np.ndarray, plan_dts: np.ndarray, *, now_s: float, dt_s: float,
-             steps: int) -> np.ndarray:
+def _aligned(
+    positions: np.ndarray, stamps: np.ndarray, plan_dts: np.ndarray, *, now_s: float, dt_s: float, steps: int
+) -> np.ndarray:
     """(J, steps, 3) plans (J, L, 3) stamped stamps (J,) with steps plan_dts (J,) sampled at now_s + n
     dt_s."""
     last = positions.shape[1] - 1
@@ -332,9 +349,16 @@ def covariance_radius_m(cov_m2: np.ndarray) -> float | np.ndarray:
     return float(radius) if radius.ndim == 0 else radius
 
 
-def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, steps: int,
-                   own_cov_radius_m: float, params: FieldParams,
-                   current_position_only: bool = False) -> TeammatePaths:
+def teammate_paths(
+    plans: Sequence[HorizonPlan],
+    *,
+    now_s: float,
+    dt_s: float,
+    steps: int,
+    own_cov_radius_m: float,
+    params: FieldParams,
+    current_position_only: bool = False,
+) -> TeammatePaths:
     """Align every teammate's latest plan to our horizon and compute its eq. 15 d_max.
 
     d_max = teammate_d_max_base_m + r_sigma(own) + r_sigma(j) + teammate_speed_mps * max(0, age - grace)
@@ -373,8 +397,9 @@ def teammate_paths(plans: Sequence[HorizonPlan], *, now_s: float, dt_s: float, s
     cap = params.covariance_radius_cap_m
     radii = np.minimum(covariance_radius_m(covs), cap)
     age = np.maximum(now_s - stamps - params.teammate_age_grace_s, 0.0)
-    d_max = (params.teammate_d_max_base_m + min(own_cov_radius_m, cap) + radii
-             + params.teammate_speed_mps * age)
+    d_max = (
+        params.teammate_d_max_base_m + min(own_cov_radius_m, cap) + radii + params.teammate_speed_mps * age
+    )
     ids = np.array([p.vehicle_id for p in plans], dtype=int)
     in_formation = np.array([p.in_formation for p in plans], dtype=bool)
     return TeammatePaths(paths, ids, in_formation, d_max, rejected)
@@ -403,8 +428,17 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % TWO_PI - np.pi
 
 
-def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.ndarray, mate_ids: np.ndarray,
-                    own_id: int, team_size: int, d_des_m: float, params: FieldParams) -> np.ndarray:
+def tracking_inputs(
+    *,
+    rel_xy: np.ndarray,
+    rho: np.ndarray,
+    mates_rel_xy: np.ndarray,
+    mate_ids: np.ndarray,
+    own_id: int,
+    team_size: int,
+    d_des_m: float,
+    params: FieldParams,
+) -> np.ndarray:
     """Active-tracking input (eqs. 10-11), (N+1, 2), before its clamp.
 
     rel_xy (N+1, 2): own horizontal position minus the person's, rho (N+1,) its norm; mates_rel_xy (J, N+1,
@@ -425,8 +459,13 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
     if not within.any():
         return np.zeros_like(rel_xy)
     signed, delta, mate_ids = signed[within], delta[within], mate_ids[within]
-    mag = cotangential_magnitude(delta, d_min=params.tracking_min_fraction * d_max, d_max=d_max,
-                                 gain=params.gain, freeze_fraction=params.freeze_fraction)
+    mag = cotangential_magnitude(
+        delta,
+        d_min=params.tracking_min_fraction * d_max,
+        d_max=d_max,
+        gain=params.gain,
+        freeze_fraction=params.freeze_fraction,
+    )
     side = np.sign(signed)
     if (side == 0.0).any():
         side = np.where(side == 0.0, np.where(own_id < mate_ids, -1.0, 1.0)[:, None], side)
@@ -434,8 +473,9 @@ def tracking_inputs(*, rel_xy: np.ndarray, rho: np.ndarray, mates_rel_xy: np.nda
     return scalar[:, None] * _tangents(rel_xy, rho)
 
 
-def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, peak: float, params: FieldParams,
-                     tie_sign=1.0) -> np.ndarray:
+def repulsion_inputs(
+    *, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, peak: float, params: FieldParams, tie_sign=1.0
+) -> np.ndarray:
     """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eq. 12), (N+1, 2).
 
     diff_xy (M, N+1, 2) from each source to us; dist (M, N+1) the distance the thresholds apply to; d_min a
@@ -449,14 +489,16 @@ def repulsion_inputs(*, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, pea
     d_max = d_max[within] if np.ndim(d_max) == 2 else d_max
     tie_sign = tie_sign[within] if np.ndim(tie_sign) == 2 else tie_sign
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
-    mag = cotangential_magnitude(dist, d_min=d_min, d_max=d_max, gain=gain,
-                                 freeze_fraction=params.freeze_fraction)
+    mag = cotangential_magnitude(
+        dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction
+    )
     norm = np.sqrt(np.einsum("...i,...i->...", diff_xy, diff_xy))
     return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)
 
 
-def braking_margin_m(*, diff_xy: np.ndarray, velocities_xy: np.ndarray, brake_mps2: float,
-                     cap_m: float) -> np.ndarray:
+def braking_margin_m(
+    *, diff_xy: np.ndarray, velocities_xy: np.ndarray, brake_mps2: float, cap_m: float
+) -> np.ndarray:
     """Distance (M, N+1) the MAV needs to stop its approach to each source: v_close^2 / (2 brake_mps2),
     capped at cap_m.
 
@@ -469,10 +511,21 @@ def braking_margin_m(*, diff_xy: np.ndarray, velocities_xy: np.ndarray, brake_mp
     return np.minimum(closing * closing / (2.0 * brake_mps2), cap_m)
 
 
-def obstacle_inputs(*, diff_xy: np.ndarray, surface: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray,
-                    person_xy: np.ndarray, obstacles: ObstacleSet, d_min: float, d_max: float,
-                    person_d_min_m: float, active: np.ndarray, params: FieldParams,
-                    margin_m: np.ndarray | float = 0.0) -> np.ndarray:
+def obstacle_inputs(
+    *,
+    diff_xy: np.ndarray,
+    surface: np.ndarray,
+    rel_xy: np.ndarray,
+    rho: np.ndarray,
+    person_xy: np.ndarray,
+    obstacles: ObstacleSet,
+    d_min: float,
+    d_max: float,
+    person_d_min_m: float,
+    active: np.ndarray,
+    params: FieldParams,
+    margin_m: np.ndarray | float = 0.0,
+) -> np.ndarray:
     """Static and virtual obstacle input (eq. 13) with its radial slide, (N+1, 2).
 
     diff_xy (M, N+1, 2) from each axis to us; surface (M, N+1) the distance to each cylinder's surface; active
@@ -485,30 +538,43 @@ def obstacle_inputs(*, diff_xy: np.ndarray, surface: np.ndarray, rel_xy: np.ndar
     """
     freeze = params.freeze_fraction
     gain = peak_gain(params.obstacle_peak_mps2, d_min=d_min, d_max=d_max, freeze_fraction=freeze)
-    brake = cotangential_magnitude(surface - margin_m, d_min=d_min, d_max=d_max, gain=gain,
-                                   freeze_fraction=freeze)
+    brake = cotangential_magnitude(
+        surface - margin_m, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=freeze
+    )
     brake = np.where(active, brake, 0.0)
     unit = _away(diff_xy, surface + obstacles.radii_m[:, None], 1.0)
     force = (brake[..., None] * unit).sum(axis=0)
     # The slide steers round the trunk at its own distance: the braking margin only stops the approach.
-    mag = np.where(active, cotangential_magnitude(surface, d_min=d_min, d_max=d_max, gain=gain,
-                                                  freeze_fraction=freeze), 0.0)
+    mag = np.where(
+        active,
+        cotangential_magnitude(surface, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=freeze),
+        0.0,
+    )
     if params.obstacle_slide > 0.0 and (mag > 0.0).any():
         tangent = _tangents(rel_xy, rho)
         blocked = np.abs(np.einsum("mni,ni->mn", unit, tangent))
-        rho_m = np.sqrt(np.einsum("mni,mni->mn", obstacles.centers_m[:, None, :] - person_xy[None],
-                                  obstacles.centers_m[:, None, :] - person_xy[None]))
+        rho_m = np.sqrt(
+            np.einsum(
+                "mni,mni->mn",
+                obstacles.centers_m[:, None, :] - person_xy[None],
+                obstacles.centers_m[:, None, :] - person_xy[None],
+            )
+        )
         inner_open = rho_m - obstacles.radii_m[:, None] - d_min > person_d_min_m
         side = np.where((rho[None, :] < rho_m) & inner_open, -1.0, 1.0)
-        slide = np.clip((params.obstacle_slide * mag * blocked * side).sum(axis=0), -params.slide_max_mps2,
-                        params.slide_max_mps2)
+        slide = np.clip(
+            (params.obstacle_slide * mag * blocked * side).sum(axis=0),
+            -params.slide_max_mps2,
+            params.slide_max_mps2,
+        )
         radial = rel_xy / np.where(rho > 1e-9, rho, np.inf)[:, None]
         force = force + slide[:, None] * radial
     return force
 
 
-def away_from_trunks(force_xy: np.ndarray, *, own_xy: np.ndarray, obstacles: ObstacleSet, reach_m: float,
-                     own_z: np.ndarray) -> np.ndarray:
+def away_from_trunks(
+    force_xy: np.ndarray, *, own_xy: np.ndarray, obstacles: ObstacleSet, reach_m: float, own_z: np.ndarray
+) -> np.ndarray:
     """The person's repulsion (N+1, 2) without its components towards trunks within reach_m of the MAV.
 
     The person's keep-out (7 m) is a comfort distance, a trunk is a collision: a MAV squeezed between a
@@ -530,8 +596,16 @@ def away_from_trunks(force_xy: np.ndarray, *, own_xy: np.ndarray, obstacles: Obs
     return out
 
 
-def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, person_xy: np.ndarray,
-                    obstacles: ObstacleSet, active: np.ndarray, params: FieldParams) -> np.ndarray:
+def approach_inputs(
+    *,
+    own_xy: np.ndarray,
+    rel_xy: np.ndarray,
+    rho: np.ndarray,
+    person_xy: np.ndarray,
+    obstacles: ObstacleSet,
+    active: np.ndarray,
+    params: FieldParams,
+) -> np.ndarray:
     """Approach-angle input against local minima behind obstacles, (N+1, 2), before its clamp.
 
     An obstacle counts when active (M, N+1) (its surface within approach_range_m of the MAV) and it lies
@@ -547,8 +621,13 @@ def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, 
     gamma_m = np.arctan2(obs_rel[..., 1], obs_rel[..., 0])
     gamma = np.arctan2(rel_xy[:, 1], rel_xy[:, 0])
     signed = _wrap(gamma[None, :] - gamma_m)
-    mag = cotangential_magnitude(np.abs(signed), d_min=0.0, d_max=params.approach_angle_rad, gain=params.gain,
-                                 freeze_fraction=params.freeze_fraction)
+    mag = cotangential_magnitude(
+        np.abs(signed),
+        d_min=0.0,
+        d_max=params.approach_angle_rad,
+        gain=params.gain,
+        freeze_fraction=params.freeze_fraction,
+    )
     diff = own_xy[None, :, :] - obstacles.centers_m[:, None, :]
     surface = np.sqrt(np.einsum("mni,mni->mn", diff, diff)) - obstacles.radii_m[:, None]
     ramp = np.clip(1.0 - surface / params.approach_range_m, 0.0, 1.0)
@@ -559,10 +638,20 @@ def approach_inputs(*, own_xy: np.ndarray, rel_xy: np.ndarray, rho: np.ndarray, 
     return scalar[:, None] * _tangents(rel_xy, rho)
 
 
-def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarray, teammates: TeammatePaths,
-                    obstacles: ObstacleSet, team_size: int, d_des_m: float, params: FieldParams,
-                    terms: FieldTerms, own_id: int = 0, in_formation: bool = True,
-                    own_velocities_mps: np.ndarray | None = None) -> ExternalInputs:
+def external_inputs(
+    *,
+    own_positions_m: np.ndarray,
+    person_position_m: np.ndarray,
+    teammates: TeammatePaths,
+    obstacles: ObstacleSet,
+    team_size: int,
+    d_des_m: float,
+    params: FieldParams,
+    terms: FieldTerms,
+    own_id: int = 0,
+    in_formation: bool = True,
+    own_velocities_mps: np.ndarray | None = None,
+) -> ExternalInputs:
     """Every external input for horizon steps n = 0..N and their clamped total (eqs. 10-14).
 
     own_positions_m: (N+1, 3) our position at step n (the previous plan, the start position at n = 0);
@@ -591,10 +680,19 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
     if terms.tracking and in_formation and teammates.count and teammates.in_formation.any():
         mates = teammates.in_formation
         mates_rel = teammates.positions_m[mates, :, :2] - person_xy[None]
-        tracking = clamp_norm(tracking_inputs(rel_xy=rel, rho=rho, mates_rel_xy=mates_rel,
-                                              mate_ids=teammates.vehicle_ids[mates], own_id=own_id,
-                                              team_size=team_size, d_des_m=d_des_m, params=params),
-                              params.tracking_max_mps2)
+        tracking = clamp_norm(
+            tracking_inputs(
+                rel_xy=rel,
+                rho=rho,
+                mates_rel_xy=mates_rel,
+                mate_ids=teammates.vehicle_ids[mates],
+                own_id=own_id,
+                team_size=team_size,
+                d_des_m=d_des_m,
+                params=params,
+            ),
+            params.tracking_max_mps2,
+        )
 
     if terms.teammates and teammates.count:
         diff = own_xy[None] - teammates.positions_m[..., :2]
@@ -605,8 +703,15 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
             d_min = params.teammate_d_min_m
             d_max = np.maximum(teammates.d_max_m, d_min + 1e-3)[:, None]
         tie = np.where(own_id < teammates.vehicle_ids, -1.0, 1.0)[:, None]
-        teammate = repulsion_inputs(diff_xy=diff, dist=dist, d_min=d_min, d_max=d_max,
-                                    peak=params.teammate_peak_mps2, params=params, tie_sign=tie)
+        teammate = repulsion_inputs(
+            diff_xy=diff,
+            dist=dist,
+            d_min=d_min,
+            d_max=d_max,
+            peak=params.teammate_peak_mps2,
+            params=params,
+            tie_sign=tie,
+        )
 
     if (terms.obstacles or terms.approach) and obstacles.count:
         diff = own_xy[None] - obstacles.centers_m[:, None, :]
@@ -617,31 +722,64 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
             d_min, d_max = params.obstacle_d_min_m, params.obstacle_d_max_m
         margin = 0.0
         if own_velocities_mps is not None and not terms.dqmpc_thresholds:
-            margin = braking_margin_m(diff_xy=diff, velocities_xy=np.asarray(own_velocities_mps)[:, :2],
-                                      brake_mps2=params.obstacle_brake_mps2,
-                                      cap_m=params.obstacle_brake_margin_max_m)
+            margin = braking_margin_m(
+                diff_xy=diff,
+                velocities_xy=np.asarray(own_velocities_mps)[:, :2],
+                brake_mps2=params.obstacle_brake_mps2,
+                cap_m=params.obstacle_brake_margin_max_m,
+            )
         # A cylinder counts only where the MAV is not clearly above its top.
         below_top = own[None, :, 2] < obstacles.heights_m[:, None] + d_min
         if terms.obstacles and (below_top & (surface - margin < d_max)).any():
-            obstacle = obstacle_inputs(diff_xy=diff, surface=surface, rel_xy=rel, rho=rho,
-                                       person_xy=person_xy, obstacles=obstacles, d_min=d_min, d_max=d_max,
-                                       person_d_min_m=params.person_d_min_fraction * d_des_m,
-                                       active=below_top, params=params, margin_m=margin)
+            obstacle = obstacle_inputs(
+                diff_xy=diff,
+                surface=surface,
+                rel_xy=rel,
+                rho=rho,
+                person_xy=person_xy,
+                obstacles=obstacles,
+                d_min=d_min,
+                d_max=d_max,
+                person_d_min_m=params.person_d_min_fraction * d_des_m,
+                active=below_top,
+                params=params,
+                margin_m=margin,
+            )
         if terms.approach and in_formation:
             near = below_top & (surface < params.approach_range_m)
             if near.any():
-                approach = clamp_norm(approach_inputs(own_xy=own_xy, rel_xy=rel, rho=rho, person_xy=person_xy,
-                                                      obstacles=obstacles, active=near, params=params),
-                                      params.approach_max_mps2)
+                approach = clamp_norm(
+                    approach_inputs(
+                        own_xy=own_xy,
+                        rel_xy=rel,
+                        rho=rho,
+                        person_xy=person_xy,
+                        obstacles=obstacles,
+                        active=near,
+                        params=params,
+                    ),
+                    params.approach_max_mps2,
+                )
 
     if terms.person:
         lo, hi = params.person_d_min_fraction * d_des_m, params.person_d_max_fraction * d_des_m
         if hi > lo and (rho < hi).any():
-            person = repulsion_inputs(diff_xy=rel[None], dist=rho[None], d_min=lo, d_max=hi,
-                                      peak=params.person_peak_mps2, params=params)
+            person = repulsion_inputs(
+                diff_xy=rel[None],
+                dist=rho[None],
+                d_min=lo,
+                d_max=hi,
+                peak=params.person_peak_mps2,
+                params=params,
+            )
             if obstacles.count and (person != 0.0).any():
-                person = away_from_trunks(person, own_xy=own_xy, obstacles=obstacles,
-                                          reach_m=params.obstacle_d_min_m, own_z=own[:, 2])
+                person = away_from_trunks(
+                    person,
+                    own_xy=own_xy,
+                    obstacles=obstacles,
+                    reach_m=params.obstacle_d_min_m,
+                    own_z=own[:, 2],
+                )
 
     total_xy = clamp_norm(tracking + teammate + obstacle + person + approach, params.f_max_mps2)
     fault = not bool(np.isfinite(total_xy).all())
@@ -653,5 +791,12 @@ def external_inputs(*, own_positions_m: np.ndarray, person_position_m: np.ndarra
         out[:, :2] = xy
         return out
 
-    return ExternalInputs(total=as3(total_xy), tracking=as3(tracking), teammates=as3(teammate),
-                          obstacles=as3(obstacle), person=as3(person), approach=as3(approach), fault=fault)
+    return ExternalInputs(
+        total=as3(total_xy),
+        tracking=as3(tracking),
+        teammates=as3(teammate),
+        obstacles=as3(obstacle),
+        person=as3(person),
+        approach=as3(approach),
+        fault=fault,
+    )

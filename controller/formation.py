@@ -111,9 +111,12 @@ class FormationController:
         self._terms = FieldTerms.for_method(self._method)
         mpc_params = params.mpc
         if self._method == Method.PRICE:
-            mpc_params = replace(mpc_params, input_weight=params.price.input_weight,
-                                 terminal_position_weight=params.price.terminal_weight,
-                                 terminal_velocity_weight=params.price.terminal_weight)
+            mpc_params = replace(
+                mpc_params,
+                input_weight=params.price.input_weight,
+                terminal_position_weight=params.price.terminal_weight,
+                terminal_velocity_weight=params.price.terminal_weight,
+            )
         self._mpc_params: MpcParams = mpc_params
         self._mpc = ModelPredictiveController(mpc_params)
         self._steps = mpc_params.horizon_steps + 1
@@ -145,9 +148,18 @@ class FormationController:
         self._counts = dict.fromkeys(ControllerStats.__dataclass_fields__, 0)
 
     # ------------------------------------------------------------------------------------------------ step
-    def step(self, *, now_s: float, own: VehicleState, person: PersonEstimate | None,
-             teammates: Sequence[HorizonPlan], obstacles: Sequence[Obstacle], formation: FormationParams,
-             in_formation: bool = True, preferred_bearing_rad: float | None = None) -> ControlOutput:
+    def step(
+        self,
+        *,
+        now_s: float,
+        own: VehicleState,
+        person: PersonEstimate | None,
+        teammates: Sequence[HorizonPlan],
+        obstacles: Sequence[Obstacle],
+        formation: FormationParams,
+        in_formation: bool = True,
+        preferred_bearing_rad: float | None = None,
+    ) -> ControlOutput:
         """Plan one control tick at now_s (s, the caller's clock); return the plan and the way-point.
 
         teammates: the latest plan of each teammate (any age; in_formation ones count for K and the spacing);
@@ -180,22 +192,41 @@ class FormationController:
             f_total = self._inputs(tick, mates, obstacle_set, formation)
         target, target_v = self._target(tick, f_total, formation, preferred_bearing_rad, price)
 
-        sol = self._mpc.solve(position_m=start_p, velocity_mps=start_v, target_position_m=target,
-                              target_velocity_mps=target_v, external_inputs_mps2=f_total)
+        sol = self._mpc.solve(
+            position_m=start_p,
+            velocity_mps=start_v,
+            target_position_m=target,
+            target_velocity_mps=target_v,
+            external_inputs_mps2=f_total,
+        )
         if not sol.ok:
-            return self._brake(tick, SolveStatus.BRAKING, f"MPC: {sol.message or sol.status}",
-                               iterations=sol.iterations, solve_time_s=sol.solve_time_s)
+            return self._brake(
+                tick,
+                SolveStatus.BRAKING,
+                f"MPC: {sol.message or sol.status}",
+                iterations=sol.iterations,
+                solve_time_s=sol.solve_time_s,
+            )
 
         positions, velocities = sol.positions_m, sol.velocities_mps
         if price:
-            field = price_field(own_position_m=start_p, goal_position_m=target,
-                                teammate_positions_m=mates.positions_m[:, 0, :],
-                                teammate_d_max_m=mates.d_max_m, obstacles=obstacle_set,
-                                fields=self._params.fields, params=self._params.price)
+            field = price_field(
+                own_position_m=start_p,
+                goal_position_m=target,
+                teammate_positions_m=mates.positions_m[:, 0, :],
+                teammate_d_max_m=mates.d_max_m,
+                obstacles=obstacle_set,
+                fields=self._params.fields,
+                params=self._params.price,
+            )
             f_total = np.repeat(field[None, :], self._steps, axis=0)
-            positions, velocities = predict(position_m=start_p, velocity_mps=start_v,
-                                            inputs_mps2=sol.inputs_mps2, external_inputs_mps2=f_total,
-                                            params=mp)
+            positions, velocities = predict(
+                position_m=start_p,
+                velocity_mps=start_v,
+                inputs_mps2=sol.inputs_mps2,
+                external_inputs_mps2=f_total,
+                params=mp,
+            )
         plan = self._plan(tick, positions, velocities)
         wp_p, wp_v = self._waypoint(plan)
         if not _finite(wp_p, wp_v):
@@ -203,13 +234,22 @@ class FormationController:
         self._prev_plan = plan
         self._counts["solved"] += 1
         yaw = bearing_rad(from_m=wp_p, to_m=np.asarray(person.position_m, dtype=float))
-        return ControlOutput(plan=plan, waypoint_position_m=wp_p, waypoint_velocity_mps=wp_v, yaw_rad=yaw,
-                             status=SolveStatus.SOLVED, external_inputs=f_total, fault=None,
-                             solver_iterations=sol.iterations, solver_time_s=sol.solve_time_s)
+        return ControlOutput(
+            plan=plan,
+            waypoint_position_m=wp_p,
+            waypoint_velocity_mps=wp_v,
+            yaw_rad=yaw,
+            status=SolveStatus.SOLVED,
+            external_inputs=f_total,
+            fault=None,
+            solver_iterations=sol.iterations,
+            solver_time_s=sol.solve_time_s,
+        )
 
     # ------------------------------------------------------------------------------------------ internals
-    def _invalid_reason(self, now_s: float, own: VehicleState, person: PersonEstimate | None,
-                        formation: FormationParams) -> str | None:
+    def _invalid_reason(
+        self, now_s: float, own: VehicleState, person: PersonEstimate | None, formation: FormationParams
+    ) -> str | None:
         """Why this tick cannot be planned, or None."""
         if not np.isfinite(now_s):
             return "the time is not finite"
@@ -239,9 +279,13 @@ class FormationController:
         vel = np.asarray(own.velocity_mps, dtype=float)
         if _sane(pos, vel):
             self._last_position = pos.copy()
-            return initial_state(measured_position_m=pos, measured_velocity_mps=vel,
-                                 reference_position_m=ref_p, reference_velocity_mps=ref_v,
-                                 params=self._params.reference)
+            return initial_state(
+                measured_position_m=pos,
+                measured_velocity_mps=vel,
+                reference_position_m=ref_p,
+                reference_velocity_mps=ref_v,
+                params=self._params.reference,
+            )
         if ref_p is not None:
             return ref_p, ref_v
         mp = self._mpc_params
@@ -252,12 +296,23 @@ class FormationController:
     def _teammates(self, teammates: Sequence[HorizonPlan], now_s: float, own: VehicleState) -> TeammatePaths:
         """Teammates' plans on our horizon. Plans carrying our id, a non-finite stamp or step, or non-finite
         numbers are dropped and counted."""
-        usable = [p for p in teammates
-                  if p.vehicle_id != self._id and math.isfinite(p.stamp_s) and p.dt_s > 0.0
-                  and math.isfinite(p.dt_s)]
-        mates = teammate_paths(usable, now_s=now_s, dt_s=self._mpc_params.dt_s, steps=self._steps,
-                               own_cov_radius_m=self._own_cov_radius(own), params=self._params.fields,
-                               current_position_only=self._method == Method.PRICE)
+        usable = [
+            p
+            for p in teammates
+            if p.vehicle_id != self._id
+            and math.isfinite(p.stamp_s)
+            and p.dt_s > 0.0
+            and math.isfinite(p.dt_s)
+        ]
+        mates = teammate_paths(
+            usable,
+            now_s=now_s,
+            dt_s=self._mpc_params.dt_s,
+            steps=self._steps,
+            own_cov_radius_m=self._own_cov_radius(own),
+            params=self._params.fields,
+            current_position_only=self._method == Method.PRICE,
+        )
         self._counts["rejected_plans"] += len(teammates) - len(usable) + mates.rejected
         return mates
 
@@ -280,8 +335,9 @@ class FormationController:
             self._cov_key, self._cov_radius = key, (covariance_radius_m(cov) if _finite(cov) else 0.0)
         return self._cov_radius
 
-    def _inputs(self, tick: _Tick, mates: TeammatePaths, obstacle_set: ObstacleSet,
-                formation: FormationParams) -> np.ndarray:
+    def _inputs(
+        self, tick: _Tick, mates: TeammatePaths, obstacle_set: ObstacleSet, formation: FormationParams
+    ) -> np.ndarray:
         """(N+1, 3) clamped external inputs on the previous plan, moved to begin at the start state."""
         prm = self._params
         dt = self._mpc_params.dt_s
@@ -299,16 +355,31 @@ class FormationController:
         if prm.reference.predict_person:
             person_v = np.asarray(tick.person.velocity_mps, dtype=float)
             person_p = person_p + person_v * (dt * np.arange(self._steps)[:, None])
-        ext = external_inputs(own_positions_m=own_path, person_position_m=person_p, teammates=mates,
-                              obstacles=obstacle_set, team_size=1 + int(np.count_nonzero(mates.in_formation)),
-                              d_des_m=formation.d_des_m, params=prm.fields, terms=self._terms,
-                              own_id=self._id, in_formation=tick.in_formation, own_velocities_mps=own_vel)
+        ext = external_inputs(
+            own_positions_m=own_path,
+            person_position_m=person_p,
+            teammates=mates,
+            obstacles=obstacle_set,
+            team_size=1 + int(np.count_nonzero(mates.in_formation)),
+            d_des_m=formation.d_des_m,
+            params=prm.fields,
+            terms=self._terms,
+            own_id=self._id,
+            in_formation=tick.in_formation,
+            own_velocities_mps=own_vel,
+        )
         if ext.fault:
             self._counts["field_faults"] += 1
         return ext.total
 
-    def _target(self, tick: _Tick, f_total: np.ndarray, formation: FormationParams,
-                preferred_bearing_rad: float | None, price: bool) -> tuple[np.ndarray, np.ndarray]:
+    def _target(
+        self,
+        tick: _Tick,
+        f_total: np.ndarray,
+        formation: FormationParams,
+        preferred_bearing_rad: float | None,
+        price: bool,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Terminal position and velocity reference, moved by the inputs' displacement, inside the arena.
 
         `price` aims at the d_des point with zero terminal velocity and no prediction (Price et al.).
@@ -317,10 +388,16 @@ class FormationController:
         ref = self._params.reference
         person_p = np.asarray(tick.person.position_m, dtype=float)
         person_v = np.zeros(3) if price else np.asarray(tick.person.velocity_mps, dtype=float)
-        target, target_v = terminal_reference(position_m=tick.start_p, person_position_m=person_p,
-                                              person_velocity_mps=person_v, d_des_m=formation.d_des_m,
-                                              h_des_m=formation.h_des_m, horizon_s=self._steps * mp.dt_s,
-                                              params=ref, preferred_bearing_rad=preferred_bearing_rad)
+        target, target_v = terminal_reference(
+            position_m=tick.start_p,
+            person_position_m=person_p,
+            person_velocity_mps=person_v,
+            d_des_m=formation.d_des_m,
+            h_des_m=formation.h_des_m,
+            horizon_s=self._steps * mp.dt_s,
+            params=ref,
+            preferred_bearing_rad=preferred_bearing_rad,
+        )
         if ref.pass_through and not price:
             shift_p, shift_v = input_displacement(f_total, dt_s=mp.dt_s)
             target, target_v = target + shift_p, target_v + shift_v
@@ -329,19 +406,27 @@ class FormationController:
     def _plan(self, tick: _Tick, positions: np.ndarray, velocities: np.ndarray) -> HorizonPlan:
         cov = np.asarray(tick.own.position_cov_m2, dtype=float)
         stamp = float(tick.now_s) if np.isfinite(tick.now_s) else 0.0
-        return HorizonPlan(vehicle_id=self._id, stamp_s=stamp, dt_s=self._mpc_params.dt_s,
-                           positions_m=positions, velocities_mps=velocities, in_formation=tick.in_formation,
-                           position_cov_m2=cov if _finite(cov) else DEFAULT_COV_M2)
+        return HorizonPlan(
+            vehicle_id=self._id,
+            stamp_s=stamp,
+            dt_s=self._mpc_params.dt_s,
+            positions_m=positions,
+            velocities_mps=velocities,
+            in_formation=tick.in_formation,
+            position_cov_m2=cov if _finite(cov) else DEFAULT_COV_M2,
+        )
 
     def _waypoint(self, plan: HorizonPlan) -> tuple[np.ndarray, np.ndarray]:
         k = min(self._params.reference.waypoint_step, len(plan.positions_m) - 1)
         return np.array(plan.positions_m[k]), np.array(plan.velocities_mps[k])
 
-    def _brake(self, tick: _Tick, status: SolveStatus, fault: str, iterations: int = 0,
-               solve_time_s: float = 0.0) -> ControlOutput:
+    def _brake(
+        self, tick: _Tick, status: SolveStatus, fault: str, iterations: int = 0, solve_time_s: float = 0.0
+    ) -> ControlOutput:
         """A braking plan from the start state: the fallback of every tick that cannot be solved."""
-        positions, velocities = braking_plan(position_m=tick.start_p, velocity_mps=tick.start_v,
-                                             params=self._mpc_params)
+        positions, velocities = braking_plan(
+            position_m=tick.start_p, velocity_mps=tick.start_v, params=self._mpc_params
+        )
         plan = self._plan(tick, positions, velocities)
         wp_p, wp_v = self._waypoint(plan)
         person = tick.person
@@ -351,6 +436,14 @@ class FormationController:
             yaw = float(tick.own.yaw_rad) if np.isfinite(tick.own.yaw_rad) else 0.0
         self._prev_plan = plan
         self._counts["no_person" if status == SolveStatus.NO_PERSON else "braking"] += 1
-        return ControlOutput(plan=plan, waypoint_position_m=wp_p, waypoint_velocity_mps=wp_v, yaw_rad=yaw,
-                             status=status, external_inputs=np.zeros((self._steps, 3)), fault=fault,
-                             solver_iterations=iterations, solver_time_s=solve_time_s)
+        return ControlOutput(
+            plan=plan,
+            waypoint_position_m=wp_p,
+            waypoint_velocity_mps=wp_v,
+            yaw_rad=yaw,
+            status=status,
+            external_inputs=np.zeros((self._steps, 3)),
+            fault=fault,
+            solver_iterations=iterations,
+            solver_time_s=solve_time_s,
+        )

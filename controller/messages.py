@@ -147,10 +147,12 @@ class Obstacle:
         _freeze(self, "center_m", (2,))
         if not (np.isfinite(self.radius_m) and self.radius_m > 0):
             raise ValueError(
-                f"obstacle radius must be a positive finite number of metres, got {self.radius_m}")
+                f"obstacle radius must be a positive finite number of metres, got {self.radius_m}"
+            )
         if not (np.isfinite(self.height_m) and self.height_m > 0):
             raise ValueError(
-                f"obstacle height must be a positive finite number of metres, got {self.height_m}")
+                f"obstacle height must be a positive finite number of metres, got {self.height_m}"
+            )
 
 
 class SolveStatus(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports

@@ -73,21 +73,29 @@ def leashed(measured: np.ndarray, reference: np.ndarray, leash: float) -> np.nda
     return measured + gap * (leash / dist)
 
 
-def initial_state(*, measured_position_m: np.ndarray, measured_velocity_mps: np.ndarray,
-                  reference_position_m: np.ndarray | None, reference_velocity_mps: np.ndarray | None,
-                  params: ReferenceParams) -> tuple[np.ndarray, np.ndarray]:
+def initial_state(
+    *,
+    measured_position_m: np.ndarray,
+    measured_velocity_mps: np.ndarray,
+    reference_position_m: np.ndarray | None,
+    reference_velocity_mps: np.ndarray | None,
+    params: ReferenceParams,
+) -> tuple[np.ndarray, np.ndarray]:
     """(3,) position and (3,) velocity the MPC starts from: the previous plan's state at now, on a leash.
 
     reference_*: the previous plan evaluated at now, or None when there is no usable previous plan.
     """
     if reference_position_m is None or reference_velocity_mps is None:
         return measured_position_m.copy(), measured_velocity_mps.copy()
-    return (leashed(measured_position_m, reference_position_m, params.leash_position_m),
-            leashed(measured_velocity_mps, reference_velocity_mps, params.leash_velocity_mps))
+    return (
+        leashed(measured_position_m, reference_position_m, params.leash_position_m),
+        leashed(measured_velocity_mps, reference_velocity_mps, params.leash_velocity_mps),
+    )
 
 
-def plan_state_at(positions_m: np.ndarray, velocities_mps: np.ndarray, *, elapsed_s: float,
-                  dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+def plan_state_at(
+    positions_m: np.ndarray, velocities_mps: np.ndarray, *, elapsed_s: float, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(3,) position and velocity of a plan (N+2, 3) `elapsed_s` after its x(0), linearly interpolated and
     held at the last state."""
     last = len(positions_m) - 1
@@ -95,8 +103,10 @@ def plan_state_at(positions_m: np.ndarray, velocities_mps: np.ndarray, *, elapse
     lo = min(int(np.floor(k)), last)
     hi = min(lo + 1, last)
     a = k - lo
-    return ((1.0 - a) * positions_m[lo] + a * positions_m[hi],
-            (1.0 - a) * velocities_mps[lo] + a * velocities_mps[hi])
+    return (
+        (1.0 - a) * positions_m[lo] + a * positions_m[hi],
+        (1.0 - a) * velocities_mps[lo] + a * velocities_mps[hi],
+    )
 
 
 def bearing_rad(*, from_m: np.ndarray, to_m: np.ndarray) -> float:
@@ -107,10 +117,17 @@ def bearing_rad(*, from_m: np.ndarray, to_m: np.ndarray) -> float:
     return float(np.arctan2(dy, dx))
 
 
-def terminal_reference(*, position_m: np.ndarray, person_position_m: np.ndarray,
-                       person_velocity_mps: np.ndarray, d_des_m: float, h_des_m: float, horizon_s: float,
-                       params: ReferenceParams,
-                       preferred_bearing_rad: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def terminal_reference(
+    *,
+    position_m: np.ndarray,
+    person_position_m: np.ndarray,
+    person_velocity_mps: np.ndarray,
+    d_des_m: float,
+    h_des_m: float,
+    horizon_s: float,
+    params: ReferenceParams,
+    preferred_bearing_rad: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The paper's terminal reference (eq. `cost`): (3,) position and (3,) velocity.
 
     The bearing is that of the MAV's start position seen from the person's *current* position (or the
@@ -118,11 +135,15 @@ def terminal_reference(*, position_m: np.ndarray, person_position_m: np.ndarray,
     (predicted with constant velocity when params.predict_person) and h_des above it; the velocity is the
     person's, vertical 0.
     """
-    bearing = (bearing_rad(from_m=person_position_m, to_m=position_m) if preferred_bearing_rad is None
-               else float(preferred_bearing_rad))
+    bearing = (
+        bearing_rad(from_m=person_position_m, to_m=position_m)
+        if preferred_bearing_rad is None
+        else float(preferred_bearing_rad)
+    )
     centre = person_position_m + (person_velocity_mps * horizon_s if params.predict_person else 0.0)
-    target = np.array([centre[0] + d_des_m * np.cos(bearing), centre[1] + d_des_m * np.sin(bearing),
-                       centre[2] + h_des_m])
+    target = np.array(
+        [centre[0] + d_des_m * np.cos(bearing), centre[1] + d_des_m * np.sin(bearing), centre[2] + h_des_m]
+    )
     return target, np.array([person_velocity_mps[0], person_velocity_mps[1], 0.0])
 
 

@@ -122,12 +122,16 @@ _V_DIAG = np.diag([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
 def _noise_templates(noise_psd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(6, 6) matrices M_pp, M_pv, M_vv with Q = Q_pp M_pp + Q_pv M_pv + Q_vv M_vv (per unit density)."""
     zeros, diag = np.zeros((3, 3)), np.diag(np.asarray(noise_psd, dtype=float))
-    return (np.block([[diag, zeros], [zeros, zeros]]), np.block([[zeros, diag], [diag, zeros]]),
-            np.block([[zeros, zeros], [zeros, diag]]))
+    return (
+        np.block([[diag, zeros], [zeros, zeros]]),
+        np.block([[zeros, diag], [diag, zeros]]),
+        np.block([[zeros, zeros], [zeros, diag]]),
+    )
 
 
-def _transition(dt_s: float, tau_s: float, templates: tuple[np.ndarray, np.ndarray, np.ndarray]
-                ) -> tuple[np.ndarray, np.ndarray]:
+def _transition(
+    dt_s: float, tau_s: float, templates: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     b = float(np.exp(-dt_s / tau_s))
     one_b, one_b2 = 1.0 - b, 1.0 - b * b
     F = np.eye(6) + (tau_s * one_b) * _F_PV - one_b * _V_DIAG
@@ -291,8 +295,12 @@ def _mahalanobis_sq(S: list[list[float]], y: list[float]) -> float:
         return float("inf")
     adj_bb, adj_bc, adj_cc = a * f - c * c, b * c - a * e, a * d - b * b
     u, v, w = y
-    quad = (adj_aa * u * u + adj_bb * v * v + adj_cc * w * w
-            + 2.0 * (adj_ab * u * v + adj_ac * u * w + adj_bc * v * w))
+    quad = (
+        adj_aa * u * u
+        + adj_bb * v * v
+        + adj_cc * w * w
+        + 2.0 * (adj_ab * u * v + adj_ac * u * w + adj_bc * v * w)
+    )
     return quad / det
 
 

@@ -102,17 +102,32 @@ DEFAULT_PARAMS: dict[str, tuple[float, int]] = {
 }
 
 # COM_OBL_RC_ACT and NAV_DLL_ACT values -> the mode PX4 switches to (None: disabled / disarm).
-OFFBOARD_LOSS_ACTIONS = {0: PeerMode.POSCTL, 1: PeerMode.ALTCTL, 2: PeerMode.STABILIZED, 3: PeerMode.RTL,
-                         4: PeerMode.LAND, 5: PeerMode.HOLD}
+OFFBOARD_LOSS_ACTIONS = {
+    0: PeerMode.POSCTL,
+    1: PeerMode.ALTCTL,
+    2: PeerMode.STABILIZED,
+    3: PeerMode.RTL,
+    4: PeerMode.LAND,
+    5: PeerMode.HOLD,
+}
 LINK_LOSS_ACTIONS = {1: PeerMode.HOLD, 2: PeerMode.RTL, 3: PeerMode.LAND}
 
-_SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-            | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_PREARM_CHECK)
-_CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
+_SENSORS = (
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+)
+_CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+)
 
 IGNORE_POSITION = 0b111  # type-mask bits of SET_POSITION_TARGET_LOCAL_NED
 IGNORE_VELOCITY = 0b111 << 3
@@ -176,11 +191,20 @@ class Px4Peer:
     plays an autopilot that does not answer a GPS_GLOBAL_ORIGIN request.
     """
 
-    def __init__(self, *, gcs_port: int, system_id: int = 1, home: tuple[float, float, float] = (
-            47.397742, 8.545594, 488.0), origin: tuple[float, float, float] | None = None,
-            start_ned_m=(0.0, 0.0, 0.0), start_yaw_ned_rad: float = 0.0, rate_hz: float = 20.0,
-            params: dict[str, float] | None = None, max_accel_mps2: float = 5.0,
-            answers_origin: bool = True) -> None:
+    def __init__(
+        self,
+        *,
+        gcs_port: int,
+        system_id: int = 1,
+        home: tuple[float, float, float] = (47.397742, 8.545594, 488.0),
+        origin: tuple[float, float, float] | None = None,
+        start_ned_m=(0.0, 0.0, 0.0),
+        start_yaw_ned_rad: float = 0.0,
+        rate_hz: float = 20.0,
+        params: dict[str, float] | None = None,
+        max_accel_mps2: float = 5.0,
+        answers_origin: bool = True,
+    ) -> None:
         self.system_id = system_id
         self.origin = tuple(origin if origin is not None else home)
         self.rate_hz = rate_hz
@@ -190,8 +214,9 @@ class Px4Peer:
         self._sock.bind(("127.0.0.1", 0))
         self._sock.setblocking(False)
         self._out = _UdpOut(self._sock, ("127.0.0.1", gcs_port))
-        self._mav = mavlink.MAVLink(self._out, srcSystem=system_id,
-                                    srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
+        self._mav = mavlink.MAVLink(
+            self._out, srcSystem=system_id, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1
+        )
         self._mav.robust_parsing = True
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -383,8 +408,11 @@ class Px4Peer:
         elif kind == "PARAM_SET" and msg.target_system in (0, self.system_id):
             if msg.param_id in self._params:
                 ptype = self._params[msg.param_id][1]
-                value = (param_float_as_int(msg.param_value) if ptype == mavlink.MAV_PARAM_TYPE_INT32
-                         else float(msg.param_value))
+                value = (
+                    param_float_as_int(msg.param_value)
+                    if ptype == mavlink.MAV_PARAM_TYPE_INT32
+                    else float(msg.param_value)
+                )
                 self._params[msg.param_id][0] = value
                 self._send_param(msg.param_id)
 
@@ -399,11 +427,18 @@ class Px4Peer:
         self._mav.param_value_send(name.encode(), wire, ptype, len(self._params), index)
 
     def _on_setpoint(self, msg, now: float) -> None:
-        sp = SeenSetpoint(t_s=now, target_system=msg.target_system, target_component=msg.target_component,
-                          frame=msg.coordinate_frame, type_mask=msg.type_mask,
-                          position_ned=(msg.x, msg.y, msg.z), velocity_ned=(msg.vx, msg.vy, msg.vz),
-                          acceleration_ned=(msg.afx, msg.afy, msg.afz), yaw_rad=msg.yaw,
-                          yaw_rate_rad_s=msg.yaw_rate)
+        sp = SeenSetpoint(
+            t_s=now,
+            target_system=msg.target_system,
+            target_component=msg.target_component,
+            frame=msg.coordinate_frame,
+            type_mask=msg.type_mask,
+            position_ned=(msg.x, msg.y, msg.z),
+            velocity_ned=(msg.vx, msg.vy, msg.vz),
+            acceleration_ned=(msg.afx, msg.afy, msg.afz),
+            yaw_rad=msg.yaw,
+            yaw_rate_rad_s=msg.yaw_rate,
+        )
         self._setpoints.append(sp)
         if msg.target_system != self.system_id or msg.coordinate_frame != mavlink.MAV_FRAME_LOCAL_NED:
             return
@@ -453,8 +488,11 @@ class Px4Peer:
                 self._set_mode(mode, now)
                 self._ack(msg, cmd, accepted)
         elif cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            self._ack(msg, cmd, accepted if self._send_requested(int(msg.param1)) else
-                      mavlink.MAV_RESULT_UNSUPPORTED)
+            self._ack(
+                msg,
+                cmd,
+                accepted if self._send_requested(int(msg.param1)) else mavlink.MAV_RESULT_UNSUPPORTED,
+            )
         elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             self._ack(msg, cmd, accepted)
         elif cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
@@ -471,12 +509,14 @@ class Px4Peer:
             self._send_home()
         elif message_id == mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN and self.answers_origin:
             lat, lon, alt = self.origin
-            self._mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)),
-                                             int(round(alt * 1e3)), int(self._now() * 1e6))
+            self._mav.gps_global_origin_send(
+                int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1e3)), int(self._now() * 1e6)
+            )
         elif message_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             version = (1 << 24) | (16 << 16) | (0 << 8) | 255  # 1.16.0 release
-            self._mav.autopilot_version_send(_CAPABILITIES, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
-                                             1000 + self.system_id)
+            self._mav.autopilot_version_send(
+                _CAPABILITIES, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 1000 + self.system_id
+            )
         else:
             return False
         return True
@@ -512,8 +552,9 @@ class Px4Peer:
             v_cmd[:2] *= lim / horizontal
         if vz_fixed is not None:
             v_cmd[2] = vz_fixed
-        v_cmd[2] = float(np.clip(v_cmd[2], -self._params["MPC_Z_VEL_MAX_UP"][0],
-                                 self._params["MPC_Z_VEL_MAX_DN"][0]))
+        v_cmd[2] = float(
+            np.clip(v_cmd[2], -self._params["MPC_Z_VEL_MAX_UP"][0], self._params["MPC_Z_VEL_MAX_DN"][0])
+        )
         a = 3.0 * (v_cmd - self._v)
         norm = np.linalg.norm(a)
         if norm > self.max_accel_mps2:
@@ -566,25 +607,41 @@ class Px4Peer:
                 self._landed, self._touchdown_t = True, now
         elif self._p[2] < self._ground_down_m - 0.1:
             self._landed, self._touchdown_t, self._flew_since_arming = False, None, True
-        if (self._landed and self._flew_since_arming and self._touchdown_t is not None
-                and now - self._touchdown_t > self._params["COM_DISARM_LAND"][0]):
+        if (
+            self._landed
+            and self._flew_since_arming
+            and self._touchdown_t is not None
+            and now - self._touchdown_t > self._params["COM_DISARM_LAND"][0]
+        ):
             self._armed = False  # landing detected: auto-disarm
 
     def _failsafes(self, now: float) -> None:
-        if (self._armed and not self._flew_since_arming and self._mode is not PeerMode.TAKEOFF
-                and now - self._armed_t > self._params["COM_DISARM_PRFLT"][0]):
+        if (
+            self._armed
+            and not self._flew_since_arming
+            and self._mode is not PeerMode.TAKEOFF
+            and now - self._armed_t > self._params["COM_DISARM_PRFLT"][0]
+        ):
             self._armed = False  # armed but never took off
         if self._mode is PeerMode.OFFBOARD and now - self._last_sp_t > self._params["COM_OF_LOSS_T"][0]:
             action = OFFBOARD_LOSS_ACTIONS.get(int(self._params["COM_OBL_RC_ACT"][0]), PeerMode.LAND)
             self._set_mode(PeerMode.HOLD, now)  # PX4 holds COM_FAIL_ACT_T before the failsafe action
             self._failsafe_action, self._failsafe_at_t = action, now + self._params["COM_FAIL_ACT_T"][0]
         dll = int(self._params["NAV_DLL_ACT"][0])
-        if (self._armed and not self._landed and dll in LINK_LOSS_ACTIONS and self._failsafe_action is None
-                and self._mode is not LINK_LOSS_ACTIONS[dll] and self._mode is not PeerMode.LAND
-                and now - self._last_gcs_heartbeat_t > self._params["COM_DL_LOSS_T"][0]):
+        if (
+            self._armed
+            and not self._landed
+            and dll in LINK_LOSS_ACTIONS
+            and self._failsafe_action is None
+            and self._mode is not LINK_LOSS_ACTIONS[dll]
+            and self._mode is not PeerMode.LAND
+            and now - self._last_gcs_heartbeat_t > self._params["COM_DL_LOSS_T"][0]
+        ):
             self._set_mode(PeerMode.HOLD, now)
-            self._failsafe_action, self._failsafe_at_t = LINK_LOSS_ACTIONS[dll], now + self._params[
-                "COM_FAIL_ACT_T"][0]
+            self._failsafe_action, self._failsafe_at_t = (
+                LINK_LOSS_ACTIONS[dll],
+                now + self._params["COM_FAIL_ACT_T"][0],
+            )
         if self._failsafe_action is not None and now >= self._failsafe_at_t:
             action, self._failsafe_action = self._failsafe_action, None
             self._set_mode(action, now)
@@ -599,8 +656,9 @@ class Px4Peer:
         if self._armed:
             base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         status = mavlink.MAV_STATE_ACTIVE if self._armed else mavlink.MAV_STATE_STANDBY
-        self._mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
-                                 self._mode.custom_mode, status)
+        self._mav.heartbeat_send(
+            mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base, self._mode.custom_mode, status
+        )
 
     def _send_fast(self, now: float) -> None:
         ms = int(now * 1e3)
@@ -609,10 +667,17 @@ class Px4Peer:
         lat, lon, alt = self._geodetic_now()
         home_alt = pymap3d.ned2geodetic(*self._home_ned, *self.origin)[2]
         hdg = int(round(math.degrees(self._yaw) % 360.0 * 100)) % 36000
-        self._mav.global_position_int_send(ms, int(round(lat * 1e7)), int(round(lon * 1e7)),
-                                           int(round(alt * 1e3)), int(round((alt - home_alt) * 1e3)),
-                                           int(round(v[0] * 100)), int(round(v[1] * 100)),
-                                           int(round(v[2] * 100)), hdg)
+        self._mav.global_position_int_send(
+            ms,
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            int(round(alt * 1e3)),
+            int(round((alt - home_alt) * 1e3)),
+            int(round(v[0] * 100)),
+            int(round(v[1] * 100)),
+            int(round(v[2] * 100)),
+            hdg,
+        )
         roll, pitch = self._tilt()
         self._mav.attitude_send(ms, roll, pitch, self._yaw, 0.0, 0.0, self._yaw_rate)
         q = _quaternion(roll, pitch, self._yaw)
@@ -635,17 +700,54 @@ class Px4Peer:
         else:
             landed = mavlink.MAV_LANDED_STATE_IN_AIR
         self._mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
-        self._mav.sys_status_send(_SENSORS, _SENSORS, _SENSORS, 200, int(12600 + 4200 * self._battery), 1000,
-                                  int(round(self._battery * 100)), 0, 0, 0, 0, 0, 0)
+        self._mav.sys_status_send(
+            _SENSORS,
+            _SENSORS,
+            _SENSORS,
+            200,
+            int(12600 + 4200 * self._battery),
+            1000,
+            int(round(self._battery * 100)),
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+        )
         lat, lon, alt = self._geodetic_now()
-        self._mav.gps_raw_int_send(int(self._now() * 1e6), 3, int(round(lat * 1e7)), int(round(lon * 1e7)),
-                                   int(round(alt * 1e3)), 80, 120, 0, 0, 14, 0, 300, 500, 100, 0, 0)
+        self._mav.gps_raw_int_send(
+            int(self._now() * 1e6),
+            3,
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            int(round(alt * 1e3)),
+            80,
+            120,
+            0,
+            0,
+            14,
+            0,
+            300,
+            500,
+            100,
+            0,
+            0,
+        )
 
     def _send_home(self) -> None:
         lat, lon, alt = pymap3d.ned2geodetic(*self._home_ned, *self.origin)
-        self._mav.home_position_send(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1e3)),
-                                     *self._home_ned, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
-                                     int(self._now() * 1e6))
+        self._mav.home_position_send(
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            int(round(alt * 1e3)),
+            *self._home_ned,
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            0.0,
+            0.0,
+            int(self._now() * 1e6),
+        )
 
 
 def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
@@ -653,8 +755,12 @@ def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, fl
     cr, sr = math.cos(roll / 2), math.sin(roll / 2)
     cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
     cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
 
 
 # What skyring's set-points must look like: local NED position + velocity feed-forward + yaw (accelerations
@@ -662,8 +768,9 @@ def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, fl
 POSITION_VELOCITY_YAW_MASK = IGNORE_ACCELERATION | IGNORE_YAW_RATE
 
 
-def setpoint_problems(sp: SeenSetpoint, *, system_id: int, max_range_m: float = 1000.0,
-                      max_speed_mps: float = 20.0) -> list[str]:
+def setpoint_problems(
+    sp: SeenSetpoint, *, system_id: int, max_range_m: float = 1000.0, max_speed_mps: float = 20.0
+) -> list[str]:
     """Everything wrong with one received set-point (empty when it is well-formed for vehicle system_id)."""
     problems = []
     if sp.target_system != system_id or sp.target_component != mavlink.MAV_COMP_ID_AUTOPILOT1:

@@ -128,17 +128,27 @@ class AgentOutputs:
 def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: bool = False) -> HorizonPlan:
     """A plan that stays at the MAV's reported position (N+2 copies), for MAVs not under formation control."""
     n = params.mpc.horizon_steps + 2
-    return HorizonPlan(vehicle_id=state.vehicle_id, stamp_s=state.stamp_s, dt_s=params.mpc.dt_s,
-                       positions_m=np.repeat(state.position_m[None, :], n, axis=0),
-                       velocities_mps=np.zeros((n, 3)), in_formation=in_formation,
-                       position_cov_m2=state.position_cov_m2)
+    return HorizonPlan(
+        vehicle_id=state.vehicle_id,
+        stamp_s=state.stamp_s,
+        dt_s=params.mpc.dt_s,
+        positions_m=np.repeat(state.position_m[None, :], n, axis=0),
+        velocities_mps=np.zeros((n, 3)),
+        in_formation=in_formation,
+        position_cov_m2=state.position_cov_m2,
+    )
 
 
 class Agent:
     """The loop of MAV `vehicle_id`: a person-tracker replica, a formation controller, teammates' plans."""
 
-    def __init__(self, *, vehicle_id: int, params: ControllerParams | None = None,
-                 agent_params: AgentParams | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        vehicle_id: int,
+        params: ControllerParams | None = None,
+        agent_params: AgentParams | None = None,
+    ) -> None:
         self.vehicle_id = int(vehicle_id)
         self._params = params = params or ControllerParams()
         self._ap = agent_params or AgentParams()
@@ -196,19 +206,32 @@ class Agent:
             try:
                 control = self._controller.step(
                     now_s=now_s,
-                    own=VehicleState(vehicle_id=self.vehicle_id, stamp_s=now_s, position_m=own.position_m,
-                                     velocity_mps=own.velocity_mps, yaw_rad=own.yaw_rad,
-                                     position_cov_m2=own.position_cov_m2),
-                    person=person, teammates=teammates, obstacles=inputs.obstacles,
-                    formation=inputs.formation, in_formation=True,
-                    preferred_bearing_rad=slot if used_slot else None)
+                    own=VehicleState(
+                        vehicle_id=self.vehicle_id,
+                        stamp_s=now_s,
+                        position_m=own.position_m,
+                        velocity_mps=own.velocity_mps,
+                        yaw_rad=own.yaw_rad,
+                        position_cov_m2=own.position_cov_m2,
+                    ),
+                    person=person,
+                    teammates=teammates,
+                    obstacles=inputs.obstacles,
+                    formation=inputs.formation,
+                    in_formation=True,
+                    preferred_bearing_rad=slot if used_slot else None,
+                )
                 yaw = control.yaw_rad
                 if control.status == SolveStatus.NO_PERSON:
                     yaw = self._search_yaw(now_s, own.yaw_rad)
                 else:
                     self._search = None
-                setpoint = Setpoint(stamp_s=now_s, position_m=control.waypoint_position_m,
-                                    velocity_mps=control.waypoint_velocity_mps, yaw_rad=yaw)
+                setpoint = Setpoint(
+                    stamp_s=now_s,
+                    position_m=control.waypoint_position_m,
+                    velocity_mps=control.waypoint_velocity_mps,
+                    yaw_rad=yaw,
+                )
                 plan = control.plan
                 if control.status == SolveStatus.BRAKING:
                     counts["braking_ticks"] += 1
@@ -218,29 +241,47 @@ class Agent:
                 fault = f"controller error: {type(exc).__name__}: {exc}"
                 control = None
                 plan = hold_plan(state=own, params=self._params, in_formation=True)
-                setpoint = Setpoint(stamp_s=now_s, position_m=own.position_m, velocity_mps=(0.0, 0.0, 0.0),
-                                    yaw_rad=own.yaw_rad)
+                setpoint = Setpoint(
+                    stamp_s=now_s,
+                    position_m=own.position_m,
+                    velocity_mps=(0.0, 0.0, 0.0),
+                    yaw_rad=own.yaw_rad,
+                )
             if used_slot:
                 counts["slot_ticks"] += 1
             self._last_control = control
         elif own is not None and inputs.role == AgentRole.AIRBORNE:
             plan = hold_plan(state=own, params=self._params, in_formation=False)
-        outbox: list[Message] = [d for d in inputs.detections
-                                 if isinstance(d, Detection) and d.source_id == self.vehicle_id]
+        outbox: list[Message] = [
+            d for d in inputs.detections if isinstance(d, Detection) and d.source_id == self.vehicle_id
+        ]
         if plan is not None and now_s - self._last_publish_s >= self._ap.plan_period_s - 1e-9:
             outbox.append(plan)
             self._last_publish_s = now_s
-        return AgentOutputs(stamp_s=now_s, setpoint=setpoint, control=control, plan=plan, person=person,
-                            outbox=tuple(outbox), tracker=self._tracker.stats(),
-                            counters=AgentCounters(**counts), teammates_known=known, used_slot=used_slot,
-                            fault=fault)
+        return AgentOutputs(
+            stamp_s=now_s,
+            setpoint=setpoint,
+            control=control,
+            plan=plan,
+            person=person,
+            outbox=tuple(outbox),
+            tracker=self._tracker.stats(),
+            counters=AgentCounters(**counts),
+            teammates_known=known,
+            used_slot=used_slot,
+            fault=fault,
+        )
 
     def _can_follow(self, now_s: float) -> bool:
         """True when this tick may follow the latest plan instead of solving the MPC again."""
         last = self._last_control
-        return (self._ap.replan_period_s > 0.0 and last is not None and self._last_person is not None
-                and last.status == SolveStatus.SOLVED
-                and 0.0 <= now_s - last.plan.stamp_s < self._ap.replan_period_s - 1e-9)
+        return (
+            self._ap.replan_period_s > 0.0
+            and last is not None
+            and self._last_person is not None
+            and last.status == SolveStatus.SOLVED
+            and 0.0 <= now_s - last.plan.stamp_s < self._ap.replan_period_s - 1e-9
+        )
 
     def _follow(self, now_s: float, plan: HorizonPlan, person: PersonEstimate) -> Setpoint:
         """The set-point of a tick between re-plans: the plan's state waypoint_step steps ahead of now."""
@@ -252,11 +293,16 @@ class Agent:
         position = (1.0 - a) * plan.positions_m[lo] + a * plan.positions_m[hi]
         velocity = (1.0 - a) * plan.velocities_mps[lo] + a * plan.velocities_mps[hi]
         to_person = person.position_m - position
-        return Setpoint(stamp_s=now_s, position_m=position, velocity_mps=velocity,
-                        yaw_rad=math.atan2(to_person[1], to_person[0]))
+        return Setpoint(
+            stamp_s=now_s,
+            position_m=position,
+            velocity_mps=velocity,
+            yaw_rad=math.atan2(to_person[1], to_person[0]),
+        )
 
-    def _phantoms(self, now_s: float, person: PersonEstimate, inputs: AgentInputs,
-                  heard: tuple[HorizonPlan, ...]) -> tuple[HorizonPlan, ...]:
+    def _phantoms(
+        self, now_s: float, person: PersonEstimate, inputs: AgentInputs, heard: tuple[HorizonPlan, ...]
+    ) -> tuple[HorizonPlan, ...]:
         """Plans at the roster slots of the in-formation teammates not heard from, moving with the person."""
         heard_ids = {p.vehicle_id for p in heard if p.in_formation}
         n = self._params.mpc.horizon_steps + 2
@@ -269,8 +315,16 @@ class Agent:
             if vid == self.vehicle_id or vid in heard_ids:
                 continue
             slot = person.position_m + np.array([d * math.cos(bearing), d * math.sin(bearing), h])
-            out.append(HorizonPlan(vehicle_id=vid, stamp_s=now_s, dt_s=dt, positions_m=slot[None, :] + drift,
-                                   velocities_mps=np.repeat(velocity[None, :], n, axis=0), in_formation=True))
+            out.append(
+                HorizonPlan(
+                    vehicle_id=vid,
+                    stamp_s=now_s,
+                    dt_s=dt,
+                    positions_m=slot[None, :] + drift,
+                    velocities_mps=np.repeat(velocity[None, :], n, axis=0),
+                    in_formation=True,
+                )
+            )
         return tuple(out)
 
     def _search_yaw(self, now_s: float, yaw_rad: float) -> float:

@@ -77,8 +77,11 @@ class Setpoint:
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))
         _freeze(self, "velocity_mps", (3,))
-        if not (np.all(np.isfinite(self.position_m)) and np.all(np.isfinite(self.velocity_mps))
-                and np.isfinite(self.yaw_rad)):
+        if not (
+            np.all(np.isfinite(self.position_m))
+            and np.all(np.isfinite(self.velocity_mps))
+            and np.isfinite(self.yaw_rad)
+        ):
             raise ValueError("a set-point must be finite")
 
 

@@ -51,8 +51,9 @@ def body_rotation(*, yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0
     return rz @ ry @ rx
 
 
-def attitude_from_acceleration(*, acceleration_mps2: np.ndarray, yaw_rad: float,
-                               gravity_mps2: float = 9.81) -> tuple[float, float]:
+def attitude_from_acceleration(
+    *, acceleration_mps2: np.ndarray, yaw_rad: float, gravity_mps2: float = 9.81
+) -> tuple[float, float]:
     """(roll_rad, pitch_rad) of a multirotor whose thrust produces acceleration_mps2 (3,) at heading yaw_rad.
 
     The thrust axis (body up) is along a + g z; inverting body_rotation's third column in the yaw frame gives
@@ -78,8 +79,14 @@ class CameraPose:
     rotation: np.ndarray
 
 
-def camera_pose(*, body_position_m: np.ndarray, yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0.0,
-                params: CameraParams = CameraParams()) -> CameraPose:
+def camera_pose(
+    *,
+    body_position_m: np.ndarray,
+    yaw_rad: float,
+    pitch_rad: float = 0.0,
+    roll_rad: float = 0.0,
+    params: CameraParams = CameraParams(),
+) -> CameraPose:
     """The camera's pose for a body at body_position_m (3,) with the given attitude."""
     r_wb = body_rotation(yaw_rad=yaw_rad, pitch_rad=pitch_rad, roll_rad=roll_rad)
     c, s = math.cos(params.pitch_down_rad), math.sin(params.pitch_down_rad)
@@ -90,8 +97,9 @@ def camera_pose(*, body_position_m: np.ndarray, yaw_rad: float, pitch_rad: float
     return CameraPose(position_m=position, rotation=rotation)
 
 
-def project(points_m: np.ndarray, pose: CameraPose, params: CameraParams = CameraParams()
-            ) -> tuple[np.ndarray, np.ndarray]:
+def project(
+    points_m: np.ndarray, pose: CameraPose, params: CameraParams = CameraParams()
+) -> tuple[np.ndarray, np.ndarray]:
     """Pinhole projection of world points (M, 3): pixels (M, 2) and depth along the optical axis (M,).
 
     Points behind the camera (depth <= 0) get NaN pixels.
@@ -109,8 +117,14 @@ def inside_image(pixels: np.ndarray, params: CameraParams = CameraParams()) -> n
     """(M,) bool: finite pixels (M, 2) inside [0, width] x [0, height]."""
     u, v = pixels[:, 0], pixels[:, 1]
     with np.errstate(invalid="ignore"):
-        return (np.isfinite(u) & np.isfinite(v) & (u >= 0.0) & (u <= params.width_px)
-                & (v >= 0.0) & (v <= params.height_px))
+        return (
+            np.isfinite(u)
+            & np.isfinite(v)
+            & (u >= 0.0)
+            & (u <= params.width_px)
+            & (v >= 0.0)
+            & (v <= params.height_px)
+        )
 
 
 def line_of_sight_clear(a_m: np.ndarray, b_m: np.ndarray, obstacles: tuple[Obstacle, ...]) -> bool:
@@ -152,8 +166,15 @@ class FrameView:
     center_offset_px: float
 
 
-def view_person(*, pose: CameraPose, center_m: np.ndarray, feet_m: np.ndarray, head_m: np.ndarray,
-                obstacles: tuple[Obstacle, ...], params: CameraParams = CameraParams()) -> FrameView:
+def view_person(
+    *,
+    pose: CameraPose,
+    center_m: np.ndarray,
+    feet_m: np.ndarray,
+    head_m: np.ndarray,
+    obstacles: tuple[Obstacle, ...],
+    params: CameraParams = CameraParams(),
+) -> FrameView:
     """Project the person's centre, feet and head (each (3,)) and check the line of sight to the centre."""
     pixels, _ = project(np.stack([center_m, feet_m, head_m]), pose, params)
     inside = inside_image(pixels, params)

@@ -36,8 +36,13 @@ class SilentVehicleParams:
             raise ValueError(f"silent-vehicle parameters must be finite and non-negative, got {values}")
 
 
-def silent_vehicle_obstacle(*, state: AutopilotState, plan: HorizonPlan | None, now_s: float,
-                            params: SilentVehicleParams = SilentVehicleParams()) -> Obstacle:
+def silent_vehicle_obstacle(
+    *,
+    state: AutopilotState,
+    plan: HorizonPlan | None,
+    now_s: float,
+    params: SilentVehicleParams = SilentVehicleParams(),
+) -> Obstacle:
     """The cylinder teammates avoid around a silent vehicle, id "silent-<vehicle id>", kind "vehicle".
 
     Centre and spread: the smallest axis-aligned box around the last reported position and the last plan's
@@ -53,5 +58,10 @@ def silent_vehicle_obstacle(*, state: AutopilotState, plan: HorizonPlan | None, 
     silence = max(0.0, now_s - state.stamp_s)
     growth = min(params.drift_mps * silence, params.max_radius_m)
     height = max(float(points[:, 2].max()), 0.0) + params.headroom_m
-    return Obstacle(obstacle_id=f"silent-{state.vehicle_id}", center_m=center,
-                    radius_m=params.body_radius_m + spread + growth, height_m=height, kind="vehicle")
+    return Obstacle(
+        obstacle_id=f"silent-{state.vehicle_id}",
+        center_m=center,
+        radius_m=params.body_radius_m + spread + growth,
+        height_m=height,
+        kind="vehicle",
+    )

@@ -42,8 +42,12 @@ class LinkParams:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.loss) and 0.0 <= self.loss <= 1.0):
             raise ValueError(f"link loss must be in [0, 1], got {self.loss}")
-        if not (math.isfinite(self.latency_s) and self.latency_s >= 0 and math.isfinite(self.jitter_s)
-                and self.jitter_s >= 0):
+        if not (
+            math.isfinite(self.latency_s)
+            and self.latency_s >= 0
+            and math.isfinite(self.jitter_s)
+            and self.jitter_s >= 0
+        ):
             raise ValueError("link latency_s and jitter_s must be non-negative")
 
 
@@ -61,8 +65,9 @@ class LinkStats:
 class SimLinks:
     """In-process broadcast between `vehicle_ids` with seeded loss, latency and jitter."""
 
-    def __init__(self, *, vehicle_ids: Iterable[int], params: LinkParams = LinkParams(),
-                 rng: np.random.Generator) -> None:
+    def __init__(
+        self, *, vehicle_ids: Iterable[int], params: LinkParams = LinkParams(), rng: np.random.Generator
+    ) -> None:
         self._ids = tuple(sorted(int(v) for v in vehicle_ids))
         if len(set(self._ids)) != len(self._ids):
             raise ValueError("vehicle ids must be unique")

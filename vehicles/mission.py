@@ -29,8 +29,7 @@ from vehicles.agent import Agent, AgentCounters, AgentInputs, AgentOutputs, Agen
 from vehicles.autopilot import Autopilot, AutopilotState, FlightMode, Setpoint
 from vehicles.link_loss import silent_vehicle_obstacle
 from vehicles.links import Links
-from vehicles.person import PERSON_CENTRE_HEIGHT_M, PersonTruth
-from vehicles.world import World
+from vehicles.world import PERSON_CENTRE_HEIGHT_M, PersonTruth, World
 
 
 class Phase(StrEnum):
@@ -132,19 +131,32 @@ class _Vehicle:
 class Mission:
     """A team of vehicles following the person. Drive it with `step(now_s)` at the control rate."""
 
-    def __init__(self, *, autopilots: Sequence[Autopilot], world: World, links: Links,
-                 controller_params: ControllerParams | None = None, formation: FormationParams | None = None,
-                 virtual_obstacles: Sequence[Obstacle] = (), formation_enabled: bool = True,
-                 params: MissionParams | None = None, agent_params: AgentParams | None = None,
-                 clock: Callable[[], float] | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        autopilots: Sequence[Autopilot],
+        world: World,
+        links: Links,
+        controller_params: ControllerParams | None = None,
+        formation: FormationParams | None = None,
+        virtual_obstacles: Sequence[Obstacle] = (),
+        formation_enabled: bool = True,
+        params: MissionParams | None = None,
+        agent_params: AgentParams | None = None,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
         controller_params = controller_params or ControllerParams()
         formation = formation or FormationParams()
         ids = [a.vehicle_id for a in autopilots]
         if not ids or len(set(ids)) != len(ids):
             raise ValueError("a mission needs at least one autopilot, with unique vehicle ids")
-        self._vehicles = {a.vehicle_id: _Vehicle(autopilot=a, agent=Agent(
-            vehicle_id=a.vehicle_id, params=controller_params, agent_params=agent_params))
-            for a in sorted(autopilots, key=lambda a: a.vehicle_id)}
+        self._vehicles = {
+            a.vehicle_id: _Vehicle(
+                autopilot=a,
+                agent=Agent(vehicle_id=a.vehicle_id, params=controller_params, agent_params=agent_params),
+            )
+            for a in sorted(autopilots, key=lambda a: a.vehicle_id)
+        }
         self._world = world
         self._links = links
         self._cparams = controller_params
@@ -211,8 +223,11 @@ class Mission:
         """Remove a virtual obstacle; trees cannot be removed."""
         if obstacle_id not in self._virtual:
             static = any(o.obstacle_id == obstacle_id for o in self._world.obstacles)
-            self._refuse(f"obstacle {obstacle_id!r} is a static obstacle and cannot be removed" if static
-                         else f"no virtual obstacle with id {obstacle_id!r}")
+            self._refuse(
+                f"obstacle {obstacle_id!r} is a static obstacle and cannot be removed"
+                if static
+                else f"no virtual obstacle with id {obstacle_id!r}"
+            )
         del self._virtual[obstacle_id]
 
     def land(self, vehicle_id: int) -> None:
@@ -253,12 +268,21 @@ class Mission:
         # A vehicle whose link is lost gets no agent tick (nothing would reach it) and leaves the roster; its
         # teammates avoid it around its last plan, the wider the longer it is silent (vehicles/link_loss.py).
         silent = {vid for vid, v in self._vehicles.items() if v.state is not None and v.state.link_lost}
-        obstacles += tuple(silent_vehicle_obstacle(state=self._vehicles[vid].state, now_s=now_s,
-                                                   plan=self._vehicles[vid].last.plan
-                                                   if self._vehicles[vid].last is not None else None)
-                           for vid in sorted(silent))
-        roster = [vid for vid, v in self._vehicles.items() if v.phase in (Phase.TAKEOFF, Phase.FORMATION)
-                  and vid not in silent and not (v.state is not None and v.state.released)]
+        obstacles += tuple(
+            silent_vehicle_obstacle(
+                state=self._vehicles[vid].state,
+                now_s=now_s,
+                plan=self._vehicles[vid].last.plan if self._vehicles[vid].last is not None else None,
+            )
+            for vid in sorted(silent)
+        )
+        roster = [
+            vid
+            for vid, v in self._vehicles.items()
+            if v.phase in (Phase.TAKEOFF, Phase.FORMATION)
+            and vid not in silent
+            and not (v.state is not None and v.state.released)
+        ]
         k = len(roster)
         offset = self._params.slot_offset_rad
         slots = tuple((vid, offset + 2.0 * math.pi * i / k) for i, vid in enumerate(roster))
@@ -268,9 +292,15 @@ class Mission:
                 self._links.receive(now_s, vid)
                 continue
             role = self._role(v)
-            inputs = AgentInputs(own=v.state, detections=self._world.detections(vid),
-                                 received=self._links.receive(now_s, vid), obstacles=obstacles,
-                                 formation=self._formation, role=role, roster=slots)
+            inputs = AgentInputs(
+                own=v.state,
+                detections=self._world.detections(vid),
+                received=self._links.receive(now_s, vid),
+                obstacles=obstacles,
+                formation=self._formation,
+                role=role,
+                roster=slots,
+            )
             t0 = self._clock() if self._clock is not None else None
             out = v.agent.tick(now_s, inputs)
             if t0 is not None:
@@ -285,8 +315,9 @@ class Mission:
     def snapshot(self) -> MissionSnapshot:
         """The mission now, for displays, logs and metrics."""
         vehicles = []
-        totals = dict.fromkeys(("rejected_detections", "rejected_messages", "controller_errors",
-                                "braking_ticks"), 0)
+        totals = dict.fromkeys(
+            ("rejected_detections", "rejected_messages", "controller_errors", "braking_ticks"), 0
+        )
         k = 0
         for vid, v in self._vehicles.items():
             out = v.last
@@ -299,20 +330,36 @@ class Mission:
             totals["rejected_messages"] += counters.rejected_messages
             totals["controller_errors"] += counters.controller_errors
             totals["braking_ticks"] += counters.braking_ticks
-            vehicles.append(VehicleSnapshot(
-                vehicle_id=vid, phase=v.phase, autopilot=state,
-                plan=out.plan if out is not None else None, person=out.person if out is not None else None,
-                setpoint=v.last_setpoint, status=control.status if control is not None else None,
-                solver_time_s=control.solver_time_s if control is not None else 0.0, tick_s=v.tick_s,
-                link_age_s=(self._now - state.stamp_s) if state is not None else None,
-                teammates_known=out.teammates_known if out is not None else 0,
-                used_slot=out.used_slot if out is not None else False,
-                fault=out.fault if out is not None else None, tracker=tracker, counters=counters))
+            vehicles.append(
+                VehicleSnapshot(
+                    vehicle_id=vid,
+                    phase=v.phase,
+                    autopilot=state,
+                    plan=out.plan if out is not None else None,
+                    person=out.person if out is not None else None,
+                    setpoint=v.last_setpoint,
+                    status=control.status if control is not None else None,
+                    solver_time_s=control.solver_time_s if control is not None else 0.0,
+                    tick_s=v.tick_s,
+                    link_age_s=(self._now - state.stamp_s) if state is not None else None,
+                    teammates_known=out.teammates_known if out is not None else 0,
+                    used_slot=out.used_slot if out is not None else False,
+                    fault=out.fault if out is not None else None,
+                    tracker=tracker,
+                    counters=counters,
+                )
+            )
         return MissionSnapshot(
-            stamp_s=self._now, vehicles=tuple(vehicles), person_truth=self._world.person_truth(),
-            obstacles=self.obstacles(), virtual_obstacle_ids=tuple(self._virtual), formation=self._formation,
-            formation_enabled=self._enabled, slot_count=k,
-            counters=MissionCounters(rejected_actions=self._rejected_actions, **totals))
+            stamp_s=self._now,
+            vehicles=tuple(vehicles),
+            person_truth=self._world.person_truth(),
+            obstacles=self.obstacles(),
+            virtual_obstacle_ids=tuple(self._virtual),
+            formation=self._formation,
+            formation_enabled=self._enabled,
+            slot_count=k,
+            counters=MissionCounters(rejected_actions=self._rejected_actions, **totals),
+        )
 
     # ---- internals ----------------------------------------------------------------------------------------
     def _vehicle(self, vehicle_id: int) -> _Vehicle:
@@ -348,8 +395,11 @@ class Mission:
             v.command_s = now_s
             v.autopilot.takeoff(self.takeoff_height_m())
         elif v.phase == Phase.TAKEOFF:
-            if s.in_air and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD) and (
-                    abs(s.position_m[2] - self.takeoff_height_m()) <= self._params.at_height_tolerance_m):
+            if (
+                s.in_air
+                and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
+                and (abs(s.position_m[2] - self.takeoff_height_m()) <= self._params.at_height_tolerance_m)
+            ):
                 v.phase = Phase.FORMATION
                 v.paused = False
             elif retry and s.mode != FlightMode.TAKEOFF and not s.in_air:

@@ -26,13 +26,23 @@ class OperatorUi:
     shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate).
     """
 
-    def __init__(self, *, actions: OperatorActions, initial: SceneView, host: str = "127.0.0.1",
-                 port: int = 8080, sigma: float = 2.0, shadows: bool = False) -> None:
+    def __init__(
+        self,
+        *,
+        actions: OperatorActions,
+        initial: SceneView,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        sigma: float = 2.0,
+        shadows: bool = False,
+    ) -> None:
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own URL box; callers print ours
-            self.server = viser.ViserServer(host=host, port=port, label="skyring ground station",
-                                            verbose=False)
-        self.server.gui.configure_theme(control_width="medium", show_share_button=False, show_logo=False,
-                                        dark_mode=False)
+            self.server = viser.ViserServer(
+                host=host, port=port, label="skyring ground station", verbose=False
+            )
+        self.server.gui.configure_theme(
+            control_width="medium", show_share_button=False, show_logo=False, dark_mode=False
+        )
         self.server.initial_camera.position = (9.0, -34.0, 30.0)
         self.server.initial_camera.look_at = (9.0, 0.0, 0.0)
         self.server.initial_camera.up = (0.0, 0.0, 1.0)

@@ -10,8 +10,14 @@ from viser import transforms as tf
 
 # One colour per MAV (cycled): distinct on a light background, none of them the person's or the obstacles'.
 VEHICLE_COLORS: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (148, 103, 189), (23, 190, 207),
-    (227, 119, 194), (188, 189, 34), (140, 86, 75),
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (148, 103, 189),
+    (23, 190, 207),
+    (227, 119, 194),
+    (188, 189, 34),
+    (140, 86, 75),
 )
 
 

@@ -35,26 +35,31 @@ def vehicle_card(vehicle: VehicleView) -> str:
     solver = "-" if vehicle.solver_time_s is None else f"{vehicle.solver_time_s * 1e3:.2f} ms"
     battery = "unknown" if vehicle.battery_fraction is None else f"{vehicle.battery_fraction * 100:.0f} %"
     status = f" ({vehicle.solve_status})" if vehicle.solve_status else ""
-    return (f"**MAV {vehicle.vehicle_id}**: {vehicle.phase}  \n"
-            f"mode {vehicle.mode}, {'armed' if vehicle.armed else 'disarmed'}, "
-            f"{'in air' if vehicle.in_air else 'on ground'}  \n"
-            f"link {link} · solver {solver}{status} · battery {battery}")
+    return (
+        f"**MAV {vehicle.vehicle_id}**: {vehicle.phase}  \n"
+        f"mode {vehicle.mode}, {'armed' if vehicle.armed else 'disarmed'}, "
+        f"{'in air' if vehicle.in_air else 'on ground'}  \n"
+        f"link {link} · solver {solver}{status} · battery {battery}"
+    )
 
 
 def status_line(view: SceneView) -> str:
     """Markdown summary at the top of the panel: time, formation state and the team's size in formation."""
     flying = sum(v.in_formation for v in view.vehicles)
     state = "running" if view.formation_enabled else "stopped (holding)"
-    return (f"t = {view.time_s:.1f} s · formation {state} · "
-            f"{flying}/{len(view.vehicles)} MAVs flying formation  \n"
-            f"d_des {view.formation.d_des_m:.1f} m · h_des {view.formation.h_des_m:.1f} m")
+    return (
+        f"t = {view.time_s:.1f} s · formation {state} · "
+        f"{flying}/{len(view.vehicles)} MAVs flying formation  \n"
+        f"d_des {view.formation.d_des_m:.1f} m · h_des {view.formation.h_des_m:.1f} m"
+    )
 
 
 class OperatorPanel:
     """Builds the GUI once from the first view and refreshes it from every later one (`refresh`)."""
 
-    def __init__(self, server: viser.ViserServer, actions: OperatorActions, initial: SceneView,
-                 *, plot_every: int = 5) -> None:
+    def __init__(
+        self, server: viser.ViserServer, actions: OperatorActions, initial: SceneView, *, plot_every: int = 5
+    ) -> None:
         self._server = server
         self._actions = actions
         self._lock = threading.Lock()
@@ -69,20 +74,38 @@ class OperatorPanel:
         self._status = gui.add_markdown(status_line(initial))
         with gui.add_folder("Formation"):
             f = initial.formation
-            self._d_des = gui.add_slider("d_des (m)", min=initial.d_des_range_m.low,
-                                         max=initial.d_des_range_m.high, step=0.1, initial_value=f.d_des_m,
-                                         hint="Desired horizontal distance from the person")
-            self._h_des = gui.add_slider("h_des (m)", min=initial.h_des_range_m.low,
-                                         max=initial.h_des_range_m.high, step=0.1, initial_value=f.h_des_m,
-                                         hint="Desired height above the person")
+            self._d_des = gui.add_slider(
+                "d_des (m)",
+                min=initial.d_des_range_m.low,
+                max=initial.d_des_range_m.high,
+                step=0.1,
+                initial_value=f.d_des_m,
+                hint="Desired horizontal distance from the person",
+            )
+            self._h_des = gui.add_slider(
+                "h_des (m)",
+                min=initial.h_des_range_m.low,
+                max=initial.h_des_range_m.high,
+                step=0.1,
+                initial_value=f.h_des_m,
+                hint="Desired height above the person",
+            )
             self._d_des.on_update(self._on_formation_input)
             self._h_des.on_update(self._on_formation_input)
             start = gui.add_button("Start formation", color="green", icon=viser.Icon.PLAYER_PLAY)
             stop = gui.add_button("Stop formation (hold)", icon=viser.Icon.PLAYER_PAUSE)
-            start.on_click(lambda e: self._run(e.client, lambda: actions.set_formation_enabled(True),
-                                               "Formation started"))
-            stop.on_click(lambda e: self._run(e.client, lambda: actions.set_formation_enabled(False),
-                                              "Formation stopped: MAVs hold position"))
+            start.on_click(
+                lambda e: self._run(
+                    e.client, lambda: actions.set_formation_enabled(True), "Formation started"
+                )
+            )
+            stop.on_click(
+                lambda e: self._run(
+                    e.client,
+                    lambda: actions.set_formation_enabled(False),
+                    "Formation stopped: MAVs hold position",
+                )
+            )
         self._land_all = gui.add_button("LAND ALL", color="red", icon=viser.Icon.PLANE_ARRIVAL)
         self._land_all.on_click(self._on_land_all)
         self._vehicle_folder = gui.add_folder("Vehicles")
@@ -90,17 +113,28 @@ class OperatorPanel:
         self._obstacle_folder = gui.add_folder("Virtual obstacles")
         with self._obstacle_folder:
             radii = initial.obstacle_radius_range_m
-            self._radius = gui.add_number("radius (m)", initial_value=min(max(1.0, radii.low), radii.high),
-                                          min=radii.low, max=radii.high, step=0.1)
+            self._radius = gui.add_number(
+                "radius (m)",
+                initial_value=min(max(1.0, radii.low), radii.high),
+                min=radii.low,
+                max=radii.high,
+                step=0.1,
+            )
             add = gui.add_button("Add obstacle, then click the ground", icon=viser.Icon.CIRCLE_PLUS)
             add.on_click(self._on_add_obstacle)
             self._obstacle_list = gui.add_markdown("none")
         self._obstacle_buttons: dict[str, Any] = {}
         with gui.add_folder("Plots"):
-            self.trace_plot = gui.add_uplot(*_plot_args("fused covariance trace (m^2)", (200, 140, 0)),
-                                             title="Fused position covariance trace", aspect=2.0)
-            self.error_plot = gui.add_uplot(*_plot_args("tracking error (m)", (200, 40, 40)),
-                                             title="Tracking error (simulation)", aspect=2.0)
+            self.trace_plot = gui.add_uplot(
+                *_plot_args("fused covariance trace (m^2)", (200, 140, 0)),
+                title="Fused position covariance trace",
+                aspect=2.0,
+            )
+            self.error_plot = gui.add_uplot(
+                *_plot_args("tracking error (m)", (200, 40, 40)),
+                title="Tracking error (simulation)",
+                aspect=2.0,
+            )
         self.refresh(initial)
 
     # ---- refresh from the ground station -------------------------------------------------------------------
@@ -123,9 +157,11 @@ class OperatorPanel:
         if card is None:
             gui = self._server.gui
             with self._vehicle_folder:
-                card = {"text": gui.add_markdown(vehicle_card(vehicle)),
-                        "land": gui.add_button(f"Land MAV {vehicle.vehicle_id}", color="orange"),
-                        "release": gui.add_button(f"Release MAV {vehicle.vehicle_id} to formation")}
+                card = {
+                    "text": gui.add_markdown(vehicle_card(vehicle)),
+                    "land": gui.add_button(f"Land MAV {vehicle.vehicle_id}", color="orange"),
+                    "release": gui.add_button(f"Release MAV {vehicle.vehicle_id} to formation"),
+                }
             vid = vehicle.vehicle_id
             card["land"].on_click(lambda e: self._on_land(e, vid))
             card["release"].on_click(lambda e: self._on_release(e, vid))
@@ -145,14 +181,19 @@ class OperatorPanel:
         for button in self._obstacle_buttons.values():
             button.remove()
         self._obstacle_buttons = {}
-        lines = [f"- `{o.obstacle_id}` at ({o.center_m[0]:.1f}, {o.center_m[1]:.1f}) m, r {o.radius_m:.1f} m"
-                 for o in virtual]
+        lines = [
+            f"- `{o.obstacle_id}` at ({o.center_m[0]:.1f}, {o.center_m[1]:.1f}) m, r {o.radius_m:.1f} m"
+            for o in virtual
+        ]
         self._obstacle_list.content = "\n".join(lines) if lines else "none"
         with self._obstacle_folder:
             for obstacle_id in ids:
                 button = self._server.gui.add_button(f"Remove {obstacle_id}", icon=viser.Icon.TRASH)
-                button.on_click(lambda e, oid=obstacle_id: self._run(
-                    e.client, lambda: self._actions.remove_obstacle(oid), f"Obstacle {oid} removed"))
+                button.on_click(
+                    lambda e, oid=obstacle_id: self._run(
+                        e.client, lambda: self._actions.remove_obstacle(oid), f"Obstacle {oid} removed"
+                    )
+                )
                 self._obstacle_buttons[obstacle_id] = button
 
     def _record(self, view: SceneView) -> None:
@@ -174,8 +215,7 @@ class OperatorPanel:
     # ---- operator input ------------------------------------------------------------------------------------
 
     def _run(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> bool:
-        """Run one operator action; tell the client the outcome. Never raises (a GUI callback must not die).
-        """
+        """Run one operator action; tell the client the outcome. Never raises: a GUI callback must not die."""
         try:
             action()
         except ValueError as exc:
@@ -198,8 +238,7 @@ class OperatorPanel:
             self._show_formation(self._view)
 
     def _show_formation(self, view: SceneView) -> None:
-        """Put the ground station's values in the inputs (programmatic updates carry no client: not re-sent).
-        """
+        """Show the station's values in the inputs (programmatic updates carry no client: not re-sent)."""
         self._shown_formation = view.formation
         self._d_des.value = view.formation.d_des_m
         self._h_des.value = view.formation.h_des_m
@@ -212,8 +251,12 @@ class OperatorPanel:
             if not self._click_registered:
                 self._server.scene.on_click()(self._on_scene_click)
                 self._click_registered = True
-        _notify(event.client, "Place obstacle", "Click on the ground where the obstacle should stand.",
-                color="blue")
+        _notify(
+            event.client,
+            "Place obstacle",
+            "Click on the ground where the obstacle should stand.",
+            color="blue",
+        )
 
     def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
         with self._lock:
@@ -225,32 +268,60 @@ class OperatorPanel:
             return
         point = ground_point(np.asarray(event.ray_origin), np.asarray(event.ray_direction))
         if point is None:
-            _notify(event.client, "Refused", "That click did not hit the ground: press Add obstacle again "
-                    "and click on the grid.", color="red")
+            _notify(
+                event.client,
+                "Refused",
+                "That click did not hit the ground: press Add obstacle again and click on the grid.",
+                color="red",
+            )
             return
         x, y = float(point[0]), float(point[1])
-        self._run(event.client, lambda: self._actions.add_obstacle(x_m=x, y_m=y, radius_m=radius),
-                  f"Obstacle of radius {radius:.1f} m added at ({x:.1f}, {y:.1f}) m")
+        self._run(
+            event.client,
+            lambda: self._actions.add_obstacle(x_m=x, y_m=y, radius_m=radius),
+            f"Obstacle of radius {radius:.1f} m added at ({x:.1f}, {y:.1f}) m",
+        )
 
     def _on_land(self, event: viser.GuiEvent, vehicle_id: int) -> None:
-        self._confirm(event.client, f"Land MAV {vehicle_id}?",
-                      f"MAV {vehicle_id} leaves the formation and lands where it is. It stays out of the "
-                      "formation until you release it; its teammates re-space.",
-                      f"Land MAV {vehicle_id}", lambda: self._actions.land(vehicle_id),
-                      f"MAV {vehicle_id} landing")
+        self._confirm(
+            event.client,
+            f"Land MAV {vehicle_id}?",
+            f"MAV {vehicle_id} leaves the formation and lands where it is. It stays out of the "
+            "formation until you release it; its teammates re-space.",
+            f"Land MAV {vehicle_id}",
+            lambda: self._actions.land(vehicle_id),
+            f"MAV {vehicle_id} landing",
+        )
 
     def _on_land_all(self, event: viser.GuiEvent) -> None:
-        self._confirm(event.client, "LAND ALL?", "Every MAV leaves the formation and lands where it is.",
-                      "Confirm LAND ALL", self._actions.land_all, "All MAVs landing")
+        self._confirm(
+            event.client,
+            "LAND ALL?",
+            "Every MAV leaves the formation and lands where it is.",
+            "Confirm LAND ALL",
+            self._actions.land_all,
+            "All MAVs landing",
+        )
 
     def _on_release(self, event: viser.GuiEvent, vehicle_id: int) -> None:
-        self._confirm(event.client, f"Release MAV {vehicle_id}?",
-                      f"MAV {vehicle_id} takes off again and rejoins the formation.",
-                      f"Release MAV {vehicle_id}", lambda: self._actions.release(vehicle_id),
-                      f"MAV {vehicle_id} released")
+        self._confirm(
+            event.client,
+            f"Release MAV {vehicle_id}?",
+            f"MAV {vehicle_id} takes off again and rejoins the formation.",
+            f"Release MAV {vehicle_id}",
+            lambda: self._actions.release(vehicle_id),
+            f"MAV {vehicle_id} released",
+        )
 
-    def _confirm(self, client: viser.ClientHandle | None, title: str, body: str, confirm_label: str,
-                 action: Callable[[], object], done: str) -> None:
+    def _confirm(
+        self,
+        client: viser.ClientHandle | None,
+        title: str,
+        body: str,
+        confirm_label: str,
+        action: Callable[[], object],
+        done: str,
+    ) -> None:
         """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button."""
         if client is None:
             return
@@ -269,8 +340,10 @@ class OperatorPanel:
 
 def _plot_args(label: str, color: tuple[int, int, int]) -> tuple[tuple[np.ndarray, ...], tuple[Any, ...]]:
     data = (np.zeros(0), np.zeros(0))
-    series = (viser.uplot.Series(label="t (s)"),
-              viser.uplot.Series(label=label, stroke="rgb({},{},{})".format(*color), width=2))
+    series = (
+        viser.uplot.Series(label="t (s)"),
+        viser.uplot.Series(label=label, stroke="rgb({},{},{})".format(*color), width=2),
+    )
     return data, series
 
 

@@ -52,15 +52,28 @@ class SceneRenderer:
         self._plans: dict[int, Any] = {}
         self._obstacles: dict[str, tuple[Obstacle, Any]] = {}
         self._arena_key: tuple[float, ...] | None = None
-        self._person_truth = scene.add_cylinder("/person/truth", radius=0.25, height=PERSON_HEIGHT_M,
-                                                color=PERSON_TRUTH_COLOR, visible=False)
-        self._person_estimate = scene.add_icosphere("/person/estimate", radius=0.2,
-                                                    color=PERSON_ESTIMATE_COLOR, visible=False)
-        self._covariance = scene.add_icosphere("/person/covariance", radius=1.0, color=COVARIANCE_COLOR,
-                                               opacity=0.35, visible=False, cast_shadow=False)
-        self._circle = scene.add_line_segments("/formation/circle", points=np.zeros((1, 2, 3)),
-                                               colors=CIRCLE_COLOR, thickness=2.0, thickness_units="screen",
-                                               visible=False)
+        self._person_truth = scene.add_cylinder(
+            "/person/truth", radius=0.25, height=PERSON_HEIGHT_M, color=PERSON_TRUTH_COLOR, visible=False
+        )
+        self._person_estimate = scene.add_icosphere(
+            "/person/estimate", radius=0.2, color=PERSON_ESTIMATE_COLOR, visible=False
+        )
+        self._covariance = scene.add_icosphere(
+            "/person/covariance",
+            radius=1.0,
+            color=COVARIANCE_COLOR,
+            opacity=0.35,
+            visible=False,
+            cast_shadow=False,
+        )
+        self._circle = scene.add_line_segments(
+            "/formation/circle",
+            points=np.zeros((1, 2, 3)),
+            colors=CIRCLE_COLOR,
+            thickness=2.0,
+            thickness_units="screen",
+            visible=False,
+        )
 
     def draw(self, view: SceneView) -> None:
         """Bring the scene up to date with `view` (call inside `server.atomic()` to apply it as one frame)."""
@@ -79,11 +92,18 @@ class SceneRenderer:
         self._arena_key = key
         size = view.arena_max_m - view.arena_min_m
         center = 0.5 * (view.arena_max_m + view.arena_min_m)
-        self._scene.add_grid("/arena/grid", width=float(size[0]), height=float(size[1]), cell_size=1.0,
-                             section_size=5.0, position=(float(center[0]), float(center[1]), 0.0))
+        self._scene.add_grid(
+            "/arena/grid",
+            width=float(size[0]),
+            height=float(size[1]),
+            cell_size=1.0,
+            section_size=5.0,
+            position=(float(center[0]), float(center[1]), 0.0),
+        )
         outline = box_segments(view.arena_min_m, view.arena_max_m)
-        self._scene.add_line_segments("/arena/bounds", points=outline, colors=(90, 90, 90), thickness=2.0,
-                                      thickness_units="screen")
+        self._scene.add_line_segments(
+            "/arena/bounds", points=outline, colors=(90, 90, 90), thickness=2.0, thickness_units="screen"
+        )
 
     def _draw_vehicle(self, vehicle: VehicleView, view: SceneView) -> None:
         nodes = self._vehicles.get(vehicle.vehicle_id)
@@ -95,15 +115,27 @@ class SceneRenderer:
                 "frame": self._scene.add_frame(root, show_axes=False),
                 "body": self._scene.add_box(f"{root}/body", color=color, dimensions=(0.8, 0.8, 0.2)),
                 "camera": self._scene.add_camera_frustum(
-                    f"{root}/camera", fov=cam.vertical_fov_rad, aspect=cam.aspect, scale=2.0, color=color,
-                    position=(cam.forward_offset_m, 0.0, 0.0), wxyz=camera_wxyz(cam.pitch_down_rad)),
-                "label": self._scene.add_label(f"{root}/label", vehicle_label(vehicle),
-                                               position=(0.0, 0.0, 0.7)),
+                    f"{root}/camera",
+                    fov=cam.vertical_fov_rad,
+                    aspect=cam.aspect,
+                    scale=2.0,
+                    color=color,
+                    position=(cam.forward_offset_m, 0.0, 0.0),
+                    wxyz=camera_wxyz(cam.pitch_down_rad),
+                ),
+                "label": self._scene.add_label(
+                    f"{root}/label", vehicle_label(vehicle), position=(0.0, 0.0, 0.7)
+                ),
             }
             self._vehicles[vehicle.vehicle_id] = nodes
             self._plans[vehicle.vehicle_id] = self._scene.add_line_segments(
-                f"/plan/{vehicle.vehicle_id}", points=np.zeros((1, 2, 3)), colors=color, thickness=3.0,
-                thickness_units="screen", visible=False)
+                f"/plan/{vehicle.vehicle_id}",
+                points=np.zeros((1, 2, 3)),
+                colors=color,
+                thickness=3.0,
+                thickness_units="screen",
+                visible=False,
+            )
         nodes["frame"].position = vehicle.position_m
         nodes["frame"].wxyz = yaw_wxyz(vehicle.yaw_rad)
         label = vehicle_label(vehicle)
@@ -158,9 +190,13 @@ class SceneRenderer:
                 continue
             virtual = obstacle.kind == "virtual"
             handle = self._scene.add_cylinder(
-                f"/obstacle/{obstacle_id}", radius=obstacle.radius_m, height=obstacle.height_m,
-                color=VIRTUAL_OBSTACLE_COLOR if virtual else TREE_COLOR, opacity=0.55 if virtual else None,
-                position=(float(obstacle.center_m[0]), float(obstacle.center_m[1]), obstacle.height_m / 2.0))
+                f"/obstacle/{obstacle_id}",
+                radius=obstacle.radius_m,
+                height=obstacle.height_m,
+                color=VIRTUAL_OBSTACLE_COLOR if virtual else TREE_COLOR,
+                opacity=0.55 if virtual else None,
+                position=(float(obstacle.center_m[0]), float(obstacle.center_m[1]), obstacle.height_m / 2.0),
+            )
             self._obstacles[obstacle_id] = (obstacle, handle)
 
     def _draw_circle(self, view: SceneView) -> None:
@@ -177,5 +213,9 @@ class SceneRenderer:
 
 
 def _same_obstacle(a: Obstacle, b: Obstacle) -> bool:
-    return (a.kind == b.kind and a.radius_m == b.radius_m and a.height_m == b.height_m
-            and bool(np.array_equal(a.center_m, b.center_m)))
+    return (
+        a.kind == b.kind
+        and a.radius_m == b.radius_m
+        and a.height_m == b.height_m
+        and bool(np.array_equal(a.center_m, b.center_m))
+    )

@@ -44,8 +44,9 @@ class VehicleView:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position_m", frozen_array(self.position_m, (3,), "position_m"))
-        object.__setattr__(self, "plan_positions_m",
-                           frozen_array(self.plan_positions_m, (-1, 3), "plan_positions_m"))
+        object.__setattr__(
+            self, "plan_positions_m", frozen_array(self.plan_positions_m, (-1, 3), "plan_positions_m")
+        )
 
 
 @dataclass(frozen=True)

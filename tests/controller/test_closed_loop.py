@@ -81,8 +81,15 @@ class Run:
     statuses: np.ndarray
 
 
-def simulate(*, team_size: int, duration_s: float, person, rate_hz: float = 10.0,
-             share_plans: bool = True, slots: bool = False) -> Run:
+def simulate(
+    *,
+    team_size: int,
+    duration_s: float,
+    person,
+    rate_hz: float = 10.0,
+    share_plans: bool = True,
+    slots: bool = False,
+) -> Run:
     """Fly K controllers and their vehicles; person(t) -> ((3,) position, (3,) velocity) is the estimate fed
     to every MAV. slots: give MAV k the roster bearing 2 pi k / K (the no-communication mode)."""
     period = 1.0 / rate_hz
@@ -102,8 +109,17 @@ def simulate(*, team_size: int, duration_s: float, person, rate_hz: float = 10.0
             mates = [p for j, p in enumerate(published) if j != k and p is not None] if share_plans else []
             own = VehicleState(vehicle_id=k, stamp_s=now, position_m=pos[k], velocity_mps=vel[k])
             slot = 2.0 * np.pi * k / team_size if slots else None
-            outs.append(ctrl.step(now_s=now, own=own, person=estimate, teammates=mates, obstacles=(),
-                                  formation=FORMATION, preferred_bearing_rad=slot))
+            outs.append(
+                ctrl.step(
+                    now_s=now,
+                    own=own,
+                    person=estimate,
+                    teammates=mates,
+                    obstacles=(),
+                    formation=FORMATION,
+                    preferred_bearing_rad=slot,
+                )
+            )
         if now - last_publish >= PLAN_PERIOD_S - 1e-9:
             published = [out.plan for out in outs]
             last_publish = now

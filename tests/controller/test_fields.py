@@ -45,19 +45,41 @@ def mates(*positions, in_formation=True, d_max_m=3.0) -> TeammatePaths:
 
 
 def trees(*centers, radius_m=0.3) -> ObstacleSet:
-    return ObstacleSet.from_obstacles([Obstacle(obstacle_id=f"t{i}", center_m=np.asarray(c, dtype=float),
-                                                radius_m=radius_m) for i, c in enumerate(centers)])
+    return ObstacleSet.from_obstacles(
+        [
+            Obstacle(obstacle_id=f"t{i}", center_m=np.asarray(c, dtype=float), radius_m=radius_m)
+            for i, c in enumerate(centers)
+        ]
+    )
 
 
-def inputs(own, *, teammates=None, obstacles=None, team_size=None, params=DEFAULTS, terms=ACTIVE,
-           d_des_m=8.0, in_formation=True):
+def inputs(
+    own,
+    *,
+    teammates=None,
+    obstacles=None,
+    team_size=None,
+    params=DEFAULTS,
+    terms=ACTIVE,
+    d_des_m=8.0,
+    in_formation=True,
+):
     teammates = mates() if teammates is None else teammates
     obstacles = trees() if obstacles is None else obstacles
     k = 1 + int(np.count_nonzero(teammates.in_formation)) if team_size is None else team_size
     own_path = held(own) if np.ndim(own) == 1 else own
-    return external_inputs(own_positions_m=own_path, person_position_m=PERSON, teammates=teammates,
-                           obstacles=obstacles, team_size=k, d_des_m=d_des_m, params=params, terms=terms,
-                           own_id=0, in_formation=in_formation)
+    return external_inputs(
+        own_positions_m=own_path,
+        person_position_m=PERSON,
+        teammates=teammates,
+        obstacles=obstacles,
+        team_size=k,
+        d_des_m=d_des_m,
+        params=params,
+        terms=terms,
+        own_id=0,
+        in_formation=in_formation,
+    )
 
 
 def radial_tangent(position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -83,8 +105,9 @@ def test_magnitude_below_d_min_is_saturated_at_its_finite_d_min_value():
     d_min, d_max, gain, freeze = 1.5, 3.0, 50.0, 0.2
     z0 = 0.5 * np.pi * freeze
     expected = gain * (0.5 * np.pi) / (d_max - d_min) * (1.0 / np.tan(z0) + z0 - 0.5 * np.pi)
-    below = cotangential_magnitude(np.array([1.5, 1.0, 0.0, -7.0]), d_min=d_min, d_max=d_max, gain=gain,
-                                   freeze_fraction=freeze)
+    below = cotangential_magnitude(
+        np.array([1.5, 1.0, 0.0, -7.0]), d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=freeze
+    )
     np.testing.assert_allclose(below, expected, rtol=1e-12)
     assert np.isfinite(expected)
 
@@ -120,8 +143,12 @@ def random_scene(rng: np.random.Generator, *, adversarial: bool):
     else:
         spots = rng.uniform(-15, 15, size=(n_mates + n_trees, 3))
     flags = rng.random(n_mates) < 0.7
-    team = TeammatePaths(np.stack([held(p) for p in spots[:n_mates]]), np.arange(1, n_mates + 1), flags,
-                         rng.uniform(2.5, 6.0, n_mates))
+    team = TeammatePaths(
+        np.stack([held(p) for p in spots[:n_mates]]),
+        np.arange(1, n_mates + 1),
+        flags,
+        rng.uniform(2.5, 6.0, n_mates),
+    )
     obstacles = trees(*spots[n_mates:, :2], radius_m=float(rng.uniform(0.1, 1.0)))
     return own, team, obstacles
 
@@ -146,8 +173,14 @@ def test_every_input_is_horizontal():
     for _ in range(50):
         own, team, obstacles = random_scene(rng, adversarial=False)
         result = inputs(own, teammates=team, obstacles=obstacles)
-        for term in (result.total, result.tracking, result.teammates, result.obstacles, result.person,
-                     result.approach):
+        for term in (
+            result.total,
+            result.tracking,
+            result.teammates,
+            result.obstacles,
+            result.person,
+            result.approach,
+        ):
             np.testing.assert_array_equal(term[:, 2], 0.0)
 
 
@@ -213,8 +246,9 @@ def test_out_of_formation_teammates_do_not_steer_the_spacing():
 
 def test_exactly_coincident_bearings_split_by_vehicle_id():
     own = on_circle(30.0)
-    team = TeammatePaths(np.stack([held(on_circle(30.0, 12.0))]), np.array([5]), np.array([True]),
-                         np.array([3.0]))
+    team = TeammatePaths(
+        np.stack([held(on_circle(30.0, 12.0))]), np.array([5]), np.array([True]), np.array([3.0])
+    )
     f = inputs(own, teammates=team, team_size=3).tracking[0, :2]
     _, tangent = radial_tangent(own)
     assert f @ tangent < -0.1  # own id 0 < 5: clockwise
@@ -275,9 +309,17 @@ def test_obstacle_thresholds_move_out_by_the_braking_distance_when_closing():
 
     def obstacle_force(velocity):
         vel = np.repeat(np.asarray(velocity, dtype=float)[None, :], STEPS, axis=0)
-        return external_inputs(own_positions_m=own, person_position_m=PERSON, teammates=mates(),
-                               obstacles=tree, team_size=1, d_des_m=8.0, params=DEFAULTS, terms=ACTIVE,
-                               own_velocities_mps=vel).obstacles[0, :2]
+        return external_inputs(
+            own_positions_m=own,
+            person_position_m=PERSON,
+            teammates=mates(),
+            obstacles=tree,
+            team_size=1,
+            d_des_m=8.0,
+            params=DEFAULTS,
+            terms=ACTIVE,
+            own_velocities_mps=vel,
+        ).obstacles[0, :2]
 
     closing = obstacle_force([0.0, 3.0, 0.0])  # margin 2.25 m: effective surface 1.75 m
     assert closing[1] < -3.0
@@ -290,10 +332,26 @@ def test_person_repulsion_never_pushes_the_mav_into_a_nearby_trunk():
     # The MAV is 6.5 m from the person (inside d_min = 7 m), a trunk 1 m beyond it on the same line.
     own = held(np.array([-6.5, 0.0, 8.9]))
     trunk = trees([-7.8, 0.0])
-    f = external_inputs(own_positions_m=own, person_position_m=PERSON, teammates=mates(), obstacles=trunk,
-                        team_size=1, d_des_m=8.0, params=DEFAULTS, terms=ACTIVE)
-    alone = external_inputs(own_positions_m=own, person_position_m=PERSON, teammates=mates(),
-                            obstacles=trees(), team_size=1, d_des_m=8.0, params=DEFAULTS, terms=ACTIVE)
+    f = external_inputs(
+        own_positions_m=own,
+        person_position_m=PERSON,
+        teammates=mates(),
+        obstacles=trunk,
+        team_size=1,
+        d_des_m=8.0,
+        params=DEFAULTS,
+        terms=ACTIVE,
+    )
+    alone = external_inputs(
+        own_positions_m=own,
+        person_position_m=PERSON,
+        teammates=mates(),
+        obstacles=trees(),
+        team_size=1,
+        d_des_m=8.0,
+        params=DEFAULTS,
+        terms=ACTIVE,
+    )
     assert alone.person[0, 0] == pytest.approx(-8.0)  # the full peak, straight at where the trunk is
     np.testing.assert_allclose(f.person[:, :2], 0.0, atol=1e-9)
     assert np.all(f.total[:, 0] > 0.0)  # the trunk's repulsion wins
@@ -355,8 +413,12 @@ def test_dqmpc_has_only_repulsion_with_its_own_thresholds():
 
 def test_price_has_no_input_in_the_mpc():
     own = on_circle(0.0, 7.0)
-    result = inputs(own, teammates=mates(own + np.array([1.0, 0.0, 0.0])), obstacles=trees(own[:2] + 1.0),
-                    terms=FieldTerms.for_method("price"))
+    result = inputs(
+        own,
+        teammates=mates(own + np.array([1.0, 0.0, 0.0])),
+        obstacles=trees(own[:2] + 1.0),
+        terms=FieldTerms.for_method("price"),
+    )
     np.testing.assert_array_equal(result.total, 0.0)
 
 
@@ -369,8 +431,14 @@ def test_unknown_method_is_rejected():
 def straight_plan(*, stamp_s: float, vehicle_id: int = 1, cov_scale: float = 0.25) -> HorizonPlan:
     positions = np.stack([np.array([float(i), 0.0, 8.0]) for i in range(17)])
     velocities = np.tile([10.0, 0.0, 0.0], (17, 1))
-    return HorizonPlan(vehicle_id=vehicle_id, stamp_s=stamp_s, dt_s=0.1, positions_m=positions,
-                       velocities_mps=velocities, position_cov_m2=np.eye(3) * cov_scale)
+    return HorizonPlan(
+        vehicle_id=vehicle_id,
+        stamp_s=stamp_s,
+        dt_s=0.1,
+        positions_m=positions,
+        velocities_mps=velocities,
+        position_cov_m2=np.eye(3) * cov_scale,
+    )
 
 
 def test_plan_is_shifted_by_its_age_and_held_at_its_end():
@@ -381,12 +449,20 @@ def test_plan_is_shifted_by_its_age_and_held_at_its_end():
 
 def test_teammate_d_max_grows_with_covariance_and_message_age():
     params = FieldParams()
-    fresh = teammate_paths([straight_plan(stamp_s=5.0)], now_s=5.1, dt_s=0.1, steps=16, own_cov_radius_m=0.5,
-                           params=params)
-    stale = teammate_paths([straight_plan(stamp_s=4.5)], now_s=5.1, dt_s=0.1, steps=16, own_cov_radius_m=0.5,
-                           params=params)
-    wide = teammate_paths([straight_plan(stamp_s=5.0, cov_scale=4.0)], now_s=5.1, dt_s=0.1, steps=16,
-                          own_cov_radius_m=0.5, params=params)
+    fresh = teammate_paths(
+        [straight_plan(stamp_s=5.0)], now_s=5.1, dt_s=0.1, steps=16, own_cov_radius_m=0.5, params=params
+    )
+    stale = teammate_paths(
+        [straight_plan(stamp_s=4.5)], now_s=5.1, dt_s=0.1, steps=16, own_cov_radius_m=0.5, params=params
+    )
+    wide = teammate_paths(
+        [straight_plan(stamp_s=5.0, cov_scale=4.0)],
+        now_s=5.1,
+        dt_s=0.1,
+        steps=16,
+        own_cov_radius_m=0.5,
+        params=params,
+    )
     assert fresh.d_max_m[0] == pytest.approx(3.0)
     assert stale.d_max_m[0] == pytest.approx(3.0 + 5.0 * 0.5)
     assert wide.d_max_m[0] == pytest.approx(3.0 + 1.5)
@@ -409,26 +485,50 @@ def test_covariance_radius_ignores_the_vertical_variance():
 def test_honest_gps_covariance_keeps_a_k16_neighbour_outside_d_max():
     chord_m = 2.0 * 8.0 * np.sin(np.pi / 16)
     plan = straight_plan(stamp_s=5.0)
-    honest = HorizonPlan(vehicle_id=plan.vehicle_id, stamp_s=plan.stamp_s, dt_s=plan.dt_s,
-                         positions_m=plan.positions_m, velocities_mps=plan.velocities_mps,
-                         in_formation=True, position_cov_m2=np.diag([0.25, 0.25, 1.0]))
-    paths = teammate_paths([honest], now_s=5.0, dt_s=0.1, steps=16,
-                           own_cov_radius_m=covariance_radius_m(np.diag([0.25, 0.25, 1.0])),
-                           params=FieldParams())
+    honest = HorizonPlan(
+        vehicle_id=plan.vehicle_id,
+        stamp_s=plan.stamp_s,
+        dt_s=plan.dt_s,
+        positions_m=plan.positions_m,
+        velocities_mps=plan.velocities_mps,
+        in_formation=True,
+        position_cov_m2=np.diag([0.25, 0.25, 1.0]),
+    )
+    paths = teammate_paths(
+        [honest],
+        now_s=5.0,
+        dt_s=0.1,
+        steps=16,
+        own_cov_radius_m=covariance_radius_m(np.diag([0.25, 0.25, 1.0])),
+        params=FieldParams(),
+    )
     assert paths.d_max_m[0] == pytest.approx(3.0)
     assert paths.d_max_m[0] < chord_m - 0.1
 
 
 def test_teammate_plan_with_absurd_numbers_is_dropped_and_counted():
     bad = straight_plan(stamp_s=0.0, vehicle_id=2, cov_scale=1e12)
-    team = teammate_paths([straight_plan(stamp_s=0.0), bad], now_s=0.1, dt_s=0.1, steps=16,
-                          own_cov_radius_m=0.5, params=DEFAULTS)
+    team = teammate_paths(
+        [straight_plan(stamp_s=0.0), bad],
+        now_s=0.1,
+        dt_s=0.1,
+        steps=16,
+        own_cov_radius_m=0.5,
+        params=DEFAULTS,
+    )
     assert (team.count, team.rejected) == (1, 1)
 
 
 def test_price_reads_only_the_first_state_of_a_plan():
-    team = teammate_paths([straight_plan(stamp_s=0.0)], now_s=0.5, dt_s=0.1, steps=16, own_cov_radius_m=0.5,
-                          params=FieldParams(), current_position_only=True)
+    team = teammate_paths(
+        [straight_plan(stamp_s=0.0)],
+        now_s=0.5,
+        dt_s=0.1,
+        steps=16,
+        own_cov_radius_m=0.5,
+        params=FieldParams(),
+        current_position_only=True,
+    )
     np.testing.assert_array_equal(team.positions_m[0], held([0.0, 0.0, 8.0]))
 
 

@@ -23,8 +23,9 @@ def person(position=PERSON_AT, velocity=(0.0, 0.0, 0.0), stamp_s=0.0) -> PersonE
 
 
 def state(position, velocity=(0.0, 0.0, 0.0), *, vehicle_id=0, stamp_s=0.0, yaw_rad=0.0) -> VehicleState:
-    return VehicleState(vehicle_id=vehicle_id, stamp_s=stamp_s, position_m=position, velocity_mps=velocity,
-                        yaw_rad=yaw_rad)
+    return VehicleState(
+        vehicle_id=vehicle_id, stamp_s=stamp_s, position_m=position, velocity_mps=velocity, yaw_rad=yaw_rad
+    )
 
 
 def on_circle(bearing_deg: float, radius_m: float = 8.0, height_m: float = 8.9) -> np.ndarray:
@@ -34,8 +35,14 @@ def on_circle(bearing_deg: float, radius_m: float = 8.0, height_m: float = 8.9) 
 
 def hold_plan(position, *, vehicle_id=1, stamp_s=0.0, in_formation=True) -> HorizonPlan:
     positions = np.repeat(np.asarray(position, dtype=float)[None, :], 17, axis=0)
-    return HorizonPlan(vehicle_id=vehicle_id, stamp_s=stamp_s, dt_s=0.1, positions_m=positions,
-                       velocities_mps=np.zeros((17, 3)), in_formation=in_formation)
+    return HorizonPlan(
+        vehicle_id=vehicle_id,
+        stamp_s=stamp_s,
+        dt_s=0.1,
+        positions_m=positions,
+        velocities_mps=np.zeros((17, 3)),
+        in_formation=in_formation,
+    )
 
 
 def controller(method=Method.ACTIVE, **changes) -> FormationController:
@@ -43,8 +50,15 @@ def controller(method=Method.ACTIVE, **changes) -> FormationController:
 
 
 def step(ctrl, own, *, now_s=0.0, who=None, teammates=(), obstacles=(), formation=FORMATION, **kw):
-    return ctrl.step(now_s=now_s, own=own, person=person() if who is None else who, teammates=teammates,
-                     obstacles=obstacles, formation=formation, **kw)
+    return ctrl.step(
+        now_s=now_s,
+        own=own,
+        person=person() if who is None else who,
+        teammates=teammates,
+        obstacles=obstacles,
+        formation=formation,
+        **kw,
+    )
 
 
 def assert_finite_output(out):
@@ -81,8 +95,15 @@ def test_plan_heads_for_d_des_and_h_des_along_the_current_bearing():
 
 def test_published_plan_carries_identity_stamp_and_role():
     ctrl = FormationController(vehicle_id=4, params=ControllerParams())
-    out = ctrl.step(now_s=12.5, own=state(on_circle(0.0), vehicle_id=4), person=person(), teammates=(),
-                    obstacles=(), formation=FORMATION, in_formation=False)
+    out = ctrl.step(
+        now_s=12.5,
+        own=state(on_circle(0.0), vehicle_id=4),
+        person=person(),
+        teammates=(),
+        obstacles=(),
+        formation=FORMATION,
+        in_formation=False,
+    )
     plan = out.plan
     assert (plan.vehicle_id, plan.stamp_s, plan.dt_s, plan.in_formation) == (4, 12.5, 0.1, False)
     assert out.plan.positions_m.shape == (17, 3)
@@ -181,8 +202,9 @@ def test_price_avoids_only_the_teammates_current_position():
     own = state(on_circle(0.0))
     crossing = np.repeat(on_circle(90.0)[None, :], 17, axis=0)
     crossing[5:] = on_circle(0.0) + np.array([0.0, 1.0, 0.0])  # its plan later crosses our position
-    plan = HorizonPlan(vehicle_id=1, stamp_s=0.0, dt_s=0.1, positions_m=crossing,
-                       velocities_mps=np.zeros((17, 3)))
+    plan = HorizonPlan(
+        vehicle_id=1, stamp_s=0.0, dt_s=0.1, positions_m=crossing, velocities_mps=np.zeros((17, 3))
+    )
     price = step(controller(Method.PRICE), own, teammates=[plan])
     active = step(controller(Method.ACTIVE), own, teammates=[plan])
     np.testing.assert_allclose(price.external_inputs[:, :2], 0.0, atol=1e-12)
@@ -202,15 +224,22 @@ def test_price_aims_at_zero_terminal_velocity():
 # ------------------------------------------------------------------------------------------ bad input
 def test_no_person_brakes_to_rest():
     ctrl = controller()
-    out = ctrl.step(now_s=0.0, own=state(on_circle(0.0), (2.0, 1.0, 0.0)), person=None, teammates=(),
-                    obstacles=(), formation=FORMATION)
+    out = ctrl.step(
+        now_s=0.0,
+        own=state(on_circle(0.0), (2.0, 1.0, 0.0)),
+        person=None,
+        teammates=(),
+        obstacles=(),
+        formation=FORMATION,
+    )
     assert out.status == SolveStatus.NO_PERSON
     np.testing.assert_allclose(out.plan.velocities_mps[-1], 0.0, atol=1e-9)
     assert np.linalg.norm(out.waypoint_velocity_mps) < np.hypot(2.0, 1.0)
 
 
-@pytest.mark.parametrize("field, value", [("position_m", (np.nan, 0.0, 5.0)),
-                                          ("velocity_mps", (0.0, np.inf, 0.0))])
+@pytest.mark.parametrize(
+    "field, value", [("position_m", (np.nan, 0.0, 5.0)), ("velocity_mps", (0.0, np.inf, 0.0))]
+)
 def test_non_finite_own_state_brakes_with_a_finite_way_point(field, value):
     ctrl = controller()
     good = step(ctrl, state(on_circle(0.0, 10.0, 5.0)))
@@ -233,8 +262,14 @@ def test_non_finite_person_estimate_brakes():
     assert_finite_output(out)
 
 
-@pytest.mark.parametrize("formation", [FormationParams(d_des_m=float("nan")), FormationParams(d_des_m=-3.0),
-                                       FormationParams(h_des_m=float("inf"))])
+@pytest.mark.parametrize(
+    "formation",
+    [
+        FormationParams(d_des_m=float("nan")),
+        FormationParams(d_des_m=-3.0),
+        FormationParams(h_des_m=float("inf")),
+    ],
+)
 def test_invalid_formation_parameters_brake(formation):
     out = step(controller(), state(on_circle(0.0)), formation=formation)
     assert out.status == SolveStatus.BRAKING and "formation parameters" in out.fault
@@ -251,8 +286,13 @@ def test_garbage_teammate_plans_are_dropped_and_counted():
     ctrl = controller()
     nan_plan = hold_plan((np.nan, 1.0, 8.0), vehicle_id=1)
     own_echo = hold_plan(on_circle(10.0), vehicle_id=0)
-    late_nan = HorizonPlan(vehicle_id=2, stamp_s=float("nan"), dt_s=0.1, positions_m=np.ones((17, 3)),
-                           velocities_mps=np.zeros((17, 3)))
+    late_nan = HorizonPlan(
+        vehicle_id=2,
+        stamp_s=float("nan"),
+        dt_s=0.1,
+        positions_m=np.ones((17, 3)),
+        velocities_mps=np.zeros((17, 3)),
+    )
     out = step(ctrl, state(on_circle(0.0)), teammates=[nan_plan, own_echo, late_nan])
     assert out.status == SolveStatus.SOLVED
     assert ctrl.stats.rejected_plans == 3
@@ -288,18 +328,32 @@ def test_random_garbage_never_yields_a_non_finite_way_point():
     for method in Method:
         ctrl = controller(method)
         for tick in range(60):
-            mates = [HorizonPlan(vehicle_id=int(rng.integers(0, 4)), stamp_s=float(vec(1)[0]),
-                                 dt_s=float(rng.choice([0.1, 0.0, -1.0, np.nan])),
-                                 positions_m=np.stack([vec() for _ in range(17)]),
-                                 velocities_mps=np.zeros((17, 3)))
-                     for _ in range(int(rng.integers(0, 4)))]
+            mates = [
+                HorizonPlan(
+                    vehicle_id=int(rng.integers(0, 4)),
+                    stamp_s=float(vec(1)[0]),
+                    dt_s=float(rng.choice([0.1, 0.0, -1.0, np.nan])),
+                    positions_m=np.stack([vec() for _ in range(17)]),
+                    velocities_mps=np.zeros((17, 3)),
+                )
+                for _ in range(int(rng.integers(0, 4)))
+            ]
             who = None if rng.random() < 0.1 else person(position=vec(), velocity=vec())
-            formation = FormationParams(d_des_m=float(rng.choice([8.0, 8.0, np.nan, -1.0, 1e9])),
-                                        h_des_m=float(rng.choice([8.0, 8.0, np.inf])))
+            formation = FormationParams(
+                d_des_m=float(rng.choice([8.0, 8.0, np.nan, -1.0, 1e9])),
+                h_des_m=float(rng.choice([8.0, 8.0, np.inf])),
+            )
             bearing = float(rng.choice([np.nan, 1.0])) if rng.random() < 0.2 else None
             now_s = float(rng.choice([0.1 * tick, 0.1 * tick, np.nan]))
-            out = ctrl.step(now_s=now_s, own=state(vec(), vec()), person=who, teammates=mates, obstacles=(),
-                            formation=formation, preferred_bearing_rad=bearing)
+            out = ctrl.step(
+                now_s=now_s,
+                own=state(vec(), vec()),
+                person=who,
+                teammates=mates,
+                obstacles=(),
+                formation=formation,
+                preferred_bearing_rad=bearing,
+            )
             assert_finite_output(out)
         stats = ctrl.stats
         assert stats.ticks == 60 == stats.solved + stats.braking + stats.no_person

@@ -23,9 +23,14 @@ GRID_DEG = np.arange(0, 360, STEP_DEG)
 @pytest.fixture(scope="module")
 def information() -> np.ndarray:
     """(60, 3, 3) information matrices (inverse covariances) of a detection from each grid angle."""
-    covs = [spherical_covariance(camera_position_m=[8.0 * np.cos(a), 8.0 * np.sin(a), 8.0],
-                                 target_position_m=[0.0, 0.0, 0.0], noise=NoiseParams())
-            for a in np.deg2rad(GRID_DEG)]
+    covs = [
+        spherical_covariance(
+            camera_position_m=[8.0 * np.cos(a), 8.0 * np.sin(a), 8.0],
+            target_position_m=[0.0, 0.0, 0.0],
+            noise=NoiseParams(),
+        )
+        for a in np.deg2rad(GRID_DEG)
+    ]
     return np.linalg.inv(np.array(covs))
 
 

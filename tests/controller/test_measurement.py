@@ -24,15 +24,21 @@ def _cov(camera, target, noise=NOISE) -> np.ndarray:
 
 
 def _samples(rng, n, *, camera=CAMERA, target=PERSON, noise=NOISE):
-    draws = [sample_detection(rng, camera_position_m=camera, target_position_m=target, noise=noise)
-             for _ in range(n)]
+    draws = [
+        sample_detection(rng, camera_position_m=camera, target_position_m=target, noise=noise)
+        for _ in range(n)
+    ]
     return np.array([d[0] for d in draws]), np.array([d[1] for d in draws])
 
 
 def test_covariance_is_symmetric_positive_definite_over_random_geometries():
     rng = np.random.default_rng(0)
-    offsets = np.vstack([rng.normal(scale=20.0, size=(500, 3)), [[0.0, 0.0, 0.0], [0.0, 0.0, -9.0],
-                                                                 [0.0, 0.0, 9.0], [1e4, 0.0, 0.0]]])
+    offsets = np.vstack(
+        [
+            rng.normal(scale=20.0, size=(500, 3)),
+            [[0.0, 0.0, 0.0], [0.0, 0.0, -9.0], [0.0, 0.0, 9.0], [1e4, 0.0, 0.0]],
+        ]
+    )
     for offset in offsets:
         cov = _cov(np.zeros(3), offset)
         np.testing.assert_array_equal(cov, cov.T)
@@ -55,8 +61,9 @@ def test_level_view_covariance_is_diagonal_with_c1_c2_c3_r_squared():
     r = 11.3
     cov = _cov([-r, 0.0, 0.0], [0.0, 0.0, 0.0])
     np.testing.assert_allclose(cov[~np.eye(3, dtype=bool)], 0.0, atol=1e-12)
-    np.testing.assert_allclose(np.diag(cov) / r**2, [0.01, np.deg2rad(1.0) ** 2, np.deg2rad(1.0) ** 2],
-                               rtol=0.011)
+    np.testing.assert_allclose(
+        np.diag(cov) / r**2, [0.01, np.deg2rad(1.0) ** 2, np.deg2rad(1.0) ** 2], rtol=0.011
+    )
 
 
 def test_range_direction_variance_grows_as_range_squared():
@@ -97,8 +104,9 @@ def test_sampled_detections_are_unbiased_within_one_percent_of_range():
 def test_debiasing_keeps_large_angle_noise_unbiased():
     """With 15/10 degree angle noise a plain conversion would be off by 3.6 % of the range (cos bias);
     the unbiased conversion stays within 1 %."""
-    noise = NoiseParams(range_sigma_fraction=0.1, bearing_sigma_rad=np.deg2rad(15.0),
-                        inclination_sigma_rad=np.deg2rad(10.0))
+    noise = NoiseParams(
+        range_sigma_fraction=0.1, bearing_sigma_rad=np.deg2rad(15.0), inclination_sigma_rad=np.deg2rad(10.0)
+    )
     positions, _ = _samples(np.random.default_rng(3), 20000, noise=noise)
     bias = np.linalg.norm(positions.mean(axis=0) - PERSON)
     assert bias < 0.01 * np.linalg.norm(CAMERA - PERSON)
@@ -136,8 +144,9 @@ def test_non_finite_geometry_is_rejected_with_a_clear_error():
     with pytest.raises(ValueError, match="camera_position_m"):
         _cov([np.nan, 0.0, 0.0], PERSON)
     with pytest.raises(ValueError, match="target_position_m"):
-        sample_detection(np.random.default_rng(0), camera_position_m=CAMERA, target_position_m=[1.0, 2.0],
-                         noise=NOISE)
+        sample_detection(
+            np.random.default_rng(0), camera_position_m=CAMERA, target_position_m=[1.0, 2.0], noise=NOISE
+        )
 
 
 def test_negative_noise_parameter_is_rejected():
@@ -146,6 +155,7 @@ def test_negative_noise_parameter_is_rejected():
 
 
 # ---------------------------------------------------------------- fusion
+
 
 def _random_spd(rng) -> np.ndarray:
     a = rng.normal(size=(3, 3))
@@ -177,8 +187,13 @@ def test_fused_covariance_is_symmetric_and_no_larger_than_any_input():
 
 @pytest.mark.parametrize(
     "covs",
-    [[], [np.diag([1.0, -1.0, 1.0])], [np.eye(3), np.full((3, 3), np.nan)], [np.ones((2, 2))],
-     [np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])]],
+    [
+        [],
+        [np.diag([1.0, -1.0, 1.0])],
+        [np.eye(3), np.full((3, 3), np.nan)],
+        [np.ones((2, 2))],
+        [np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])],
+    ],
     ids=["empty", "indefinite", "nan", "wrong-shape", "asymmetric"],
 )
 def test_fusion_rejects_bad_input_with_value_error(covs):

@@ -17,8 +17,9 @@ DETECTION_RATE_HZ = 4.0
 NOISE = NoiseParams()
 
 
-def _walk(rng: np.random.Generator, *, duration_s: float = 120.0, dt_s: float = 0.02,
-          speed_mps: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def _walk(
+    rng: np.random.Generator, *, duration_s: float = 120.0, dt_s: float = 0.02, speed_mps: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """(t (n,), p (n, 3)): a person walking at speed_mps with a gently wandering heading (turn rate: an
     Ornstein-Uhlenbeck process, 5 s correlation time, about 0.08 rad/s standard deviation) across gently
     undulating ground (+-0.6 m over tens of metres, slopes below 10 %); body centre 0.9 m above the ground."""
@@ -46,8 +47,11 @@ def _detections(seed: int, *, n_mavs: int = 3, duration_s: float = 120.0):
     evenly and circling slowly, each detecting at 4 Hz (staggered) with sample_detection noise."""
     rng = np.random.default_rng(seed)
     t, p = _walk(rng, duration_s=duration_s)
-    events = sorted((k / (n_mavs * DETECTION_RATE_HZ) + n / DETECTION_RATE_HZ, k)
-                    for k in range(n_mavs) for n in range(int(duration_s * DETECTION_RATE_HZ)))
+    events = sorted(
+        (k / (n_mavs * DETECTION_RATE_HZ) + n / DETECTION_RATE_HZ, k)
+        for k in range(n_mavs)
+        for n in range(int(duration_s * DETECTION_RATE_HZ))
+    )
     detections = []
     for stamp, k in events:
         if stamp > t[-1]:
@@ -88,8 +92,9 @@ def walking_runs():
 
 
 def _det(stamp: float, pos, cov=None, source: int = 0) -> Detection:
-    return Detection(source_id=source, stamp_s=stamp, position_m=pos, cov_m2=np.eye(3) * 0.25 if cov is None
-                     else cov)
+    return Detection(
+        source_id=source, stamp_s=stamp, position_m=pos, cov_m2=np.eye(3) * 0.25 if cov is None else cov
+    )
 
 
 def _settled_tracker(seed: int = 7, duration_s: float = 20.0) -> tuple[PersonTracker, list[Detection]]:
@@ -101,11 +106,16 @@ def _settled_tracker(seed: int = 7, duration_s: float = 20.0) -> tuple[PersonTra
 
 
 def _same_estimate(a, b) -> bool:
-    return (a.stamp_s == b.stamp_s and np.array_equal(a.position_m, b.position_m)
-            and np.array_equal(a.velocity_mps, b.velocity_mps) and np.array_equal(a.cov, b.cov))
+    return (
+        a.stamp_s == b.stamp_s
+        and np.array_equal(a.position_m, b.position_m)
+        and np.array_equal(a.velocity_mps, b.velocity_mps)
+        and np.array_equal(a.cov, b.cov)
+    )
 
 
 # ---------------------------------------------------------------- motion model
+
 
 def test_velocity_decays_to_ten_percent_over_three_seconds():
     F, _ = transition(dt_s=3.0, params=TrackerParams())
@@ -167,6 +177,7 @@ def test_estimate_does_not_change_the_filter():
 
 # ---------------------------------------------------------------- consistency on a walking person
 
+
 def test_average_position_nees_of_walking_person_lies_in_95_percent_chi_square_interval(walking_runs):
     """Statistics: 20 independent runs x 22 times 5 s apart (after 10 s burn-in) = 440 NEES samples. The
     filter's error decorrelates within about a second (see the next test), so the samples are independent and
@@ -194,6 +205,7 @@ def test_three_mav_fused_track_beats_single_mav_track_on_the_same_data(walking_r
 
 
 # ---------------------------------------------------------------- out-of-order detections
+
 
 def test_shuffled_detections_within_latency_window_give_same_estimate_as_in_order():
     _, _, dets = _detections(11, duration_s=30.0)
@@ -225,8 +237,10 @@ def test_detection_older_than_the_cache_is_stale_and_changes_nothing():
 def test_detection_inside_the_cache_window_is_merged():
     tracker, dets = _settled_tracker(duration_s=10.0)
     inside = dets[-19]
-    assert tracker.update(_det(inside.stamp_s + 0.01, inside.position_m, inside.cov_m2, source=5)) \
+    assert (
+        tracker.update(_det(inside.stamp_s + 0.01, inside.position_m, inside.cov_m2, source=5))
         is Verdict.ACCEPTED
+    )
     assert tracker.stats().out_of_order == 1
 
 
@@ -238,6 +252,7 @@ def test_repeated_detection_is_stale_and_changes_nothing():
 
 
 # ---------------------------------------------------------------- gating and invalid input
+
 
 def _offset_detection(tracker: PersonTracker, stamp: float, sigmas: float) -> Detection:
     """A detection sigmas Mahalanobis units from the prediction, along the innovation's widest axis."""
@@ -307,8 +322,10 @@ def test_detection_stamped_after_the_receivers_clock_is_invalid():
     assert tracker.update(_det(now + 3600.0, [0.0, 0.0, 0.9], source=4), now_s=now) is Verdict.INVALID
     assert tracker.stats().invalid == 1
     assert _same_estimate(tracker.estimate(6.0), before)
-    assert tracker.update(_det(now + 0.4, dets[-1].position_m, dets[-1].cov_m2, source=4), now_s=now) \
+    assert (
+        tracker.update(_det(now + 0.4, dets[-1].position_m, dets[-1].cov_m2, source=4), now_s=now)
         is Verdict.ACCEPTED
+    )
 
 
 def test_invalid_detection_does_not_start_a_track():
@@ -318,6 +335,7 @@ def test_invalid_detection_does_not_start_a_track():
 
 
 # ---------------------------------------------------------------- expiry and reset
+
 
 def test_estimate_expires_ten_seconds_after_the_last_detection():
     tracker = PersonTracker()

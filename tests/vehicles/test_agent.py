@@ -14,8 +14,16 @@ PERSON = np.array([0.0, 0.0, 0.9])
 
 
 def _state(vid=1, t=0.0, pos=(8.0, 0.0, 8.9)):
-    return AutopilotState(vehicle_id=vid, stamp_s=t, position_m=pos, velocity_mps=(0, 0, 0), yaw_rad=math.pi,
-                          armed=True, in_air=True, mode=FlightMode.OFFBOARD)
+    return AutopilotState(
+        vehicle_id=vid,
+        stamp_s=t,
+        position_m=pos,
+        velocity_mps=(0, 0, 0),
+        yaw_rad=math.pi,
+        armed=True,
+        in_air=True,
+        mode=FlightMode.OFFBOARD,
+    )
 
 
 def _det(source, t, pos=PERSON):
@@ -24,8 +32,14 @@ def _det(source, t, pos=PERSON):
 
 def _plan(vid, t, pos, in_formation=True):
     n = ControllerParams().mpc.horizon_steps + 2
-    return HorizonPlan(vehicle_id=vid, stamp_s=t, dt_s=0.1, positions_m=np.tile(pos, (n, 1)),
-                       velocities_mps=np.zeros((n, 3)), in_formation=in_formation)
+    return HorizonPlan(
+        vehicle_id=vid,
+        stamp_s=t,
+        dt_s=0.1,
+        positions_m=np.tile(pos, (n, 1)),
+        velocities_mps=np.zeros((n, 3)),
+        in_formation=in_formation,
+    )
 
 
 def _inputs(t, **kw):
@@ -197,8 +211,9 @@ def test_with_a_replan_period_the_mpc_is_solved_that_often_and_followed_in_betwe
     # 0.05 s after the plan: its state waypoint_step (1) steps ahead of now, i.e. at step 1.5, interpolated
     expected = 0.5 * (plan.positions_m[1] + plan.positions_m[2])
     np.testing.assert_allclose(outs[5].setpoint.position_m, expected, atol=1e-9)
-    np.testing.assert_allclose(outs[5].setpoint.velocity_mps,
-                               0.5 * (plan.velocities_mps[1] + plan.velocities_mps[2]), atol=1e-9)
+    np.testing.assert_allclose(
+        outs[5].setpoint.velocity_mps, 0.5 * (plan.velocities_mps[1] + plan.velocities_mps[2]), atol=1e-9
+    )
 
 
 def test_hold_plan_stays_at_the_reported_position():

@@ -23,8 +23,12 @@ HEAD = np.array([0.0, 0.0, 1.75])
 
 def _looking_at_person(yaw_offset_rad=0.0, pitch_rad=0.0, roll_rad=0.0):
     """A MAV 8 m east of the person and 8 m above its centre, facing it (yaw pi) plus an offset."""
-    return camera_pose(body_position_m=np.array([8.18, 0.0, 8.9]), yaw_rad=math.pi + yaw_offset_rad,
-                       pitch_rad=pitch_rad, roll_rad=roll_rad)
+    return camera_pose(
+        body_position_m=np.array([8.18, 0.0, 8.9]),
+        yaw_rad=math.pi + yaw_offset_rad,
+        pitch_rad=pitch_rad,
+        roll_rad=roll_rad,
+    )
 
 
 def test_person_45_degrees_below_straight_ahead_projects_to_the_principal_point():
@@ -47,10 +51,12 @@ def test_horizontal_field_of_view_is_69_5_degrees():
 def test_yawing_the_body_60_degrees_away_puts_the_person_out_of_frame_and_30_keeps_it_in():
     # With the camera pitched 45 deg down, a body yaw psi shows the person at atan(sqrt(2) tan(psi / 2)) off
     # the image's vertical centre line: 22 deg for 30, 39 deg for 60 (half the field of view is 34.75 deg).
-    out = view_person(pose=_looking_at_person(math.radians(60.0)), center_m=PERSON, feet_m=FEET, head_m=HEAD,
-                      obstacles=())
-    inside = view_person(pose=_looking_at_person(math.radians(30.0)), center_m=PERSON, feet_m=FEET,
-                         head_m=HEAD, obstacles=())
+    out = view_person(
+        pose=_looking_at_person(math.radians(60.0)), center_m=PERSON, feet_m=FEET, head_m=HEAD, obstacles=()
+    )
+    inside = view_person(
+        pose=_looking_at_person(math.radians(30.0)), center_m=PERSON, feet_m=FEET, head_m=HEAD, obstacles=()
+    )
     assert not out.in_frame
     assert inside.in_frame
 
@@ -82,8 +88,9 @@ def test_forward_acceleration_pitches_nose_down_and_leftward_rolls_left_side_dow
     roll, pitch = attitude_from_acceleration(acceleration_mps2=np.array([3.0, 0.0, 0.0]), yaw_rad=0.0)
     assert pitch == pytest.approx(-math.atan2(3.0, 9.81), abs=1e-12)
     assert roll == pytest.approx(0.0, abs=1e-12)
-    roll, pitch = attitude_from_acceleration(acceleration_mps2=np.array([-3.0, 0.0, 0.0]),
-                                             yaw_rad=math.pi / 2)
+    roll, pitch = attitude_from_acceleration(
+        acceleration_mps2=np.array([-3.0, 0.0, 0.0]), yaw_rad=math.pi / 2
+    )
     assert roll == pytest.approx(-math.atan2(3.0, 9.81), abs=1e-12)  # -x is the body's left at yaw 90 deg
     assert pitch == pytest.approx(0.0, abs=1e-12)
 
@@ -101,8 +108,9 @@ def test_a_trunk_between_camera_and_person_blocks_the_line_of_sight():
 
 def test_a_blocked_person_is_in_frame_but_not_visible():
     trunk = Obstacle(obstacle_id="t", center_m=(4.0, 0.0), radius_m=0.3, height_m=12.0)
-    view = view_person(pose=_looking_at_person(), center_m=PERSON, feet_m=FEET, head_m=HEAD,
-                       obstacles=(trunk,))
+    view = view_person(
+        pose=_looking_at_person(), center_m=PERSON, feet_m=FEET, head_m=HEAD, obstacles=(trunk,)
+    )
     assert view.in_frame and not view.visible
     # the principal point (1020.5, 543.5) is half a pixel off the image centre (1020, 543)
     assert view.center_offset_px == pytest.approx(math.sqrt(0.5), abs=1e-6)

@@ -11,14 +11,23 @@ from controller.messages import HorizonPlan
 from vehicles.autopilot import AutopilotState, FlightMode
 from vehicles.link_loss import SilentVehicleParams, silent_vehicle_obstacle
 from vehicles.mission import Mission, Phase
-from vehicles.scenario import Scenario, build_sim
+from vehicles.sim.scenario import Scenario, build_sim
 
 P = SilentVehicleParams(body_radius_m=0.5, drift_mps=0.5, max_radius_m=6.0, headroom_m=2.0)
 
 
 def state(position, stamp=10.0, vehicle_id=2):
-    return AutopilotState(vehicle_id=vehicle_id, stamp_s=stamp, position_m=position, velocity_mps=(0, 0, 0),
-                          yaw_rad=0.0, armed=True, in_air=True, mode=FlightMode.OFFBOARD, link_lost=True)
+    return AutopilotState(
+        vehicle_id=vehicle_id,
+        stamp_s=stamp,
+        position_m=position,
+        velocity_mps=(0, 0, 0),
+        yaw_rad=0.0,
+        armed=True,
+        in_air=True,
+        mode=FlightMode.OFFBOARD,
+        link_lost=True,
+    )
 
 
 def plan(positions):
@@ -92,8 +101,9 @@ class Silenceable:
 def test_mission_stops_steering_a_silent_vehicle_and_its_teammates_keep_clear_of_it():
     setup = build_sim(Scenario(vehicles=3, seed=2, person="still", trees="none"))
     wrapped = Silenceable(setup.autopilots[1])
-    mission = Mission(autopilots=[setup.autopilots[0], wrapped, setup.autopilots[2]], world=setup.world,
-                      links=setup.links)  # the simulated world, with vehicle 2 reached through the wrapper
+    mission = Mission(
+        autopilots=[setup.autopilots[0], wrapped, setup.autopilots[2]], world=setup.world, links=setup.links
+    )  # the simulated world, with vehicle 2 reached through the wrapper
     t = 0.0
     for _ in range(150):  # 15 s at 10 Hz: in formation
         t = round(t + 0.1, 6)

@@ -12,8 +12,11 @@ def _det(source, stamp):
 
 
 def _links(loss=0.0, latency=0.05, jitter=0.0, seed=0, ids=(1, 2, 3)):
-    return SimLinks(vehicle_ids=ids, params=LinkParams(loss=loss, latency_s=latency, jitter_s=jitter),
-                    rng=np.random.default_rng(seed))
+    return SimLinks(
+        vehicle_ids=ids,
+        params=LinkParams(loss=loss, latency_s=latency, jitter_s=jitter),
+        rng=np.random.default_rng(seed),
+    )
 
 
 def test_a_message_reaches_every_teammate_after_the_latency_and_not_the_sender():
@@ -71,8 +74,10 @@ def test_same_seed_same_deliveries_different_seed_different():
     assert delivered(1) != delivered(2)
 
 
-@pytest.mark.parametrize("kwargs", [{"loss": -0.1}, {"loss": 1.5}, {"loss": float("nan")},
-                                    {"latency_s": -1.0}, {"jitter_s": float("inf")}])
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"loss": -0.1}, {"loss": 1.5}, {"loss": float("nan")}, {"latency_s": -1.0}, {"jitter_s": float("inf")}],
+)
 def test_bad_link_parameters_are_rejected(kwargs):
     with pytest.raises(ValueError, match="link"):
         LinkParams(**kwargs)

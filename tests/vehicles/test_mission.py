@@ -7,10 +7,10 @@ import pytest
 
 from controller.messages import Obstacle
 from controller.params import FormationParams
-from server.metrics import spacing_error_deg
+from server.lab.metrics import spacing_error_deg
 from vehicles.autopilot import FlightMode
 from vehicles.mission import MissionError, MissionParams, Phase
-from vehicles.scenario import Scenario, build_sim
+from vehicles.sim.scenario import Scenario, build_sim
 
 RATE_HZ = 10.0  # the controller's own step; keeps these closed-loop tests fast
 
@@ -112,16 +112,22 @@ def test_changing_d_des_moves_the_team_to_the_new_distance():
     assert np.mean(rho) == pytest.approx(6.0, abs=0.8)
 
 
-@pytest.mark.parametrize(("action", "match"), [
-    (lambda m: m.land(99), "no vehicle with id 99"),
-    (lambda m: m.release(1), "only a landed vehicle"),
-    (lambda m: m.remove_obstacle("tree-1"), "static obstacle"),
-    (lambda m: m.remove_obstacle("nope"), "no virtual obstacle"),
-    (lambda m: m.add_obstacle(Obstacle(obstacle_id="tree-2", center_m=(1, 1), radius_m=1)), "exists already"),
-    (lambda m: m.add_obstacle("a box"), "expected an Obstacle"),
-    (lambda m: m.set_formation(FormationParams(d_des_m=math.nan)), "d_des_m"),
-    (lambda m: m.set_formation(FormationParams(h_des_m=-1.0)), "h_des_m"),
-])
+@pytest.mark.parametrize(
+    ("action", "match"),
+    [
+        (lambda m: m.land(99), "no vehicle with id 99"),
+        (lambda m: m.release(1), "only a landed vehicle"),
+        (lambda m: m.remove_obstacle("tree-1"), "static obstacle"),
+        (lambda m: m.remove_obstacle("nope"), "no virtual obstacle"),
+        (
+            lambda m: m.add_obstacle(Obstacle(obstacle_id="tree-2", center_m=(1, 1), radius_m=1)),
+            "exists already",
+        ),
+        (lambda m: m.add_obstacle("a box"), "expected an Obstacle"),
+        (lambda m: m.set_formation(FormationParams(d_des_m=math.nan)), "d_des_m"),
+        (lambda m: m.set_formation(FormationParams(h_des_m=-1.0)), "h_des_m"),
+    ],
+)
 def test_refused_operator_actions_say_why_are_counted_and_change_nothing(action, match):
     setup = _setup(trees="paper")
     t = _run(setup, 0.0, 12.0)
@@ -180,5 +186,9 @@ def test_time_going_backwards_is_refused():
 def test_takeoff_height_follows_h_des_and_stays_inside_the_arena():
     setup = _setup(formation=FormationParams(d_des_m=8.0, h_des_m=20.0))
     assert setup.mission.takeoff_height_m() == pytest.approx(9.5)
-    assert build_sim(Scenario(vehicles=1), mission_params=MissionParams(takeoff_height_m=5.0)
-                     ).mission.takeoff_height_m() == 5.0
+    assert (
+        build_sim(
+            Scenario(vehicles=1), mission_params=MissionParams(takeoff_height_m=5.0)
+        ).mission.takeoff_height_m()
+        == 5.0
+    )

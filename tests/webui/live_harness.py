@@ -15,16 +15,24 @@ import numpy as np
 from playwright.sync_api import Browser, FrameLocator, Locator, Page
 from viser import transforms as tf
 
-from server.ground_station import GroundStation
-from server.live import Urls, serve_station
+from server.station.ground_station import GroundStation
+from server.station.live import Urls, serve_station
 from vehicles.mission import Phase
-from vehicles.scenario import Scenario, build_sim
+from vehicles.sim.scenario import Scenario, build_sim
 
 RATE_HZ = 20.0  # control rate of the live station in these tests (20 Hz; the MPC's own step is 0.1 s)
 SPEED = 4.0  # simulated seconds per wall second
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic"]
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
 
 
 @dataclass
@@ -73,9 +81,18 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
     def serve() -> None:
         asyncio.set_event_loop(loop)
         try:
-            box["stats"] = loop.run_until_complete(serve_station(
-                station, host="127.0.0.1", port=0, viser_port=0, speed=SPEED, stop=stop_event,
-                on_ready=on_ready, handle_signals=False))
+            box["stats"] = loop.run_until_complete(
+                serve_station(
+                    station,
+                    host="127.0.0.1",
+                    port=0,
+                    viser_port=0,
+                    speed=SPEED,
+                    stop=stop_event,
+                    on_ready=on_ready,
+                    handle_signals=False,
+                )
+            )
         except BaseException as exc:  # noqa: BLE001 - reported to the test thread below
             box["error"] = exc
             ready.set()
@@ -87,8 +104,12 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
     assert ready.wait(30.0), "the ground station did not start within 30 s"
     if "error" in box:
         raise box["error"]
-    live = Live(station=station, urls=box["urls"], ui=box["ui"],
-                stop=lambda: loop.call_soon_threadsafe(stop_event.set))
+    live = Live(
+        station=station,
+        urls=box["urls"],
+        ui=box["ui"],
+        stop=lambda: loop.call_soon_threadsafe(stop_event.set),
+    )
     return live, thread
 
 
@@ -139,7 +160,8 @@ def scene_canvas(frame: FrameLocator) -> Locator:
 def number_input(frame: FrameLocator, label: str) -> Locator:
     """The number box of the viser slider or number input labelled `label`."""
     return frame.get_by_text(label, exact=True).locator(
-        "xpath=ancestor::div[contains(@class,'mantine-Flex-root')][1]//input[contains(@class,'NumberInput-input')]")
+        "xpath=ancestor::div[contains(@class,'mantine-Flex-root')][1]//input[contains(@class,'NumberInput-input')]"
+    )
 
 
 def newest_client(ui) -> object:

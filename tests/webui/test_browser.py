@@ -58,10 +58,16 @@ def test_changing_d_des_in_the_gui_moves_the_team_within_30_s(live, operator_pag
     box = number_input(operator_page.operator, "d_des (m)")
     box.fill(f"{target:g}")
     box.press("Enter")
-    live.wait_for(lambda: live.station.mission.formation.d_des_m == pytest.approx(target), sim_s=10.0,
-                  what="the new d_des reaches the mission")
-    took = live.wait_for(lambda: abs(live.mean_horizontal_distance_m() - target) < 1.0, sim_s=30.0,
-                         what=f"the team's mean horizontal distance reaches {target} +- 1 m")
+    live.wait_for(
+        lambda: live.station.mission.formation.d_des_m == pytest.approx(target),
+        sim_s=10.0,
+        what="the new d_des reaches the mission",
+    )
+    took = live.wait_for(
+        lambda: abs(live.mean_horizontal_distance_m() - target) < 1.0,
+        sim_s=30.0,
+        what=f"the team's mean horizontal distance reaches {target} +- 1 m",
+    )
     assert took < 30.0
 
 
@@ -78,8 +84,10 @@ def clear_ground_point(live, camera) -> tuple[np.ndarray, tuple[float, float]]:
             fx, fy = ground_to_canvas_fraction(camera, point)
             if not (0.1 < fx < 0.55 and 0.25 < fy < 0.9):
                 continue
-            clearance = min([np.hypot(*(point[:2] - person)) - ring]
-                            + [np.hypot(*(point[:2] - o.center_m)) - o.radius_m for o in snap.obstacles])
+            clearance = min(
+                [np.hypot(*(point[:2] - person)) - ring]
+                + [np.hypot(*(point[:2] - o.center_m)) - o.radius_m for o in snap.obstacles]
+            )
             if best is None or clearance > best[0]:
                 best = (clearance, point, (fx, fy))
     assert best is not None and best[0] > 3.0, "no clear ground in view"
@@ -103,13 +111,19 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     operator_page.operator.get_by_text("Add obstacle, then click the ground", exact=True).click()
     point, fraction = clear_ground_point(live, camera)
     click_ground(operator_page, fraction)
-    live.wait_for(lambda: {o.obstacle_id for o in live.station.snapshot().obstacles} != before,
-                  sim_s=20.0, what="the obstacle reaches the mission")
+    live.wait_for(
+        lambda: {o.obstacle_id for o in live.station.snapshot().obstacles} != before,
+        sim_s=20.0,
+        what="the obstacle reaches the mission",
+    )
     new = [o for o in httpx.get(f"{live.urls.api}api/obstacles").json() if o["obstacle_id"] not in before]
     assert len(new) == 1 and new[0]["kind"] == "virtual"
     assert np.hypot(new[0]["x_m"] - point[0], new[0]["y_m"] - point[1]) < 1.0
-    live.wait_for(lambda: live.ui.server.scene.get_handle_by_name(f"/obstacle/{new[0]['obstacle_id']}")
-                  is not None, sim_s=5.0, what="the obstacle is drawn")
+    live.wait_for(
+        lambda: live.ui.server.scene.get_handle_by_name(f"/obstacle/{new[0]['obstacle_id']}") is not None,
+        sim_s=5.0,
+        what="the obstacle is drawn",
+    )
     expect(operator_page.operator.get_by_text(f"Remove {new[0]['obstacle_id']}", exact=True)).to_be_visible()
 
 
@@ -165,8 +179,10 @@ def test_several_clients_see_the_same_state(live, browser, operator_page):
     try:
         assert len(live.ui.server.get_clients()) >= 2
         d_des = live.station.mission.formation.d_des_m - 0.5
-        assert httpx.put(f"{live.urls.api}api/formation",
-                         json={"d_des_m": d_des, "h_des_m": 8.0}).status_code == 200
+        assert (
+            httpx.put(f"{live.urls.api}api/formation", json={"d_des_m": d_des, "h_des_m": 8.0}).status_code
+            == 200
+        )
         added = httpx.post(f"{live.urls.api}api/obstacles", json={"x_m": -17.0, "y_m": 17.0, "radius_m": 0.8})
         assert added.status_code == 201, added.text
         for opened in pages:

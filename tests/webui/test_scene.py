@@ -15,22 +15,43 @@ from webui.view import Range, SceneView, VehicleView
 
 def vehicle(vehicle_id: int, *, phase: str = "formation", stale: bool = False) -> VehicleView:
     position = np.array([8.0 * np.cos(vehicle_id), 8.0 * np.sin(vehicle_id), 8.9])
-    return VehicleView(vehicle_id=vehicle_id, phase=phase, mode="offboard", armed=True, in_air=True,
-                       in_formation=phase == "formation", position_m=position, yaw_rad=0.3, link_age_s=2.5,
-                       link_stale=stale, solve_status="solved", solver_time_s=2.5e-4, battery_fraction=0.8,
-                       plan_positions_m=position + np.outer(np.arange(17) * 0.1, [1.0, 0.0, 0.0]))
+    return VehicleView(
+        vehicle_id=vehicle_id,
+        phase=phase,
+        mode="offboard",
+        armed=True,
+        in_air=True,
+        in_formation=phase == "formation",
+        position_m=position,
+        yaw_rad=0.3,
+        link_age_s=2.5,
+        link_stale=stale,
+        solve_status="solved",
+        solver_time_s=2.5e-4,
+        battery_fraction=0.8,
+        plan_positions_m=position + np.outer(np.arange(17) * 0.1, [1.0, 0.0, 0.0]),
+    )
 
 
 def view(*, obstacles=(), variances=(0.25, 0.04, 0.01)) -> SceneView:
     full = np.eye(6)
     full[:3, :3] = np.diag(variances)
     estimate = PersonEstimate(stamp_s=1.0, position_m=[0.5, 0.0, 0.9], velocity_mps=[0.0, 0.0, 0.0], cov=full)
-    return SceneView(time_s=1.0, vehicles=(vehicle(1), vehicle(2, phase="landing")),
-                     obstacles=tuple(obstacles), formation=FormationParams(), formation_enabled=True,
-                     arena_min_m=[-20, -20, 3], arena_max_m=[20, 20, 10], d_des_range_m=Range(1.8, 18.5),
-                     h_des_range_m=Range(2.1, 9.1),
-                     person_truth_m=[0.0, 0.0, 0.9], person_estimate=estimate, estimate_source_id=1,
-                     tracking_error_m=0.5)
+    return SceneView(
+        time_s=1.0,
+        vehicles=(vehicle(1), vehicle(2, phase="landing")),
+        obstacles=tuple(obstacles),
+        formation=FormationParams(),
+        formation_enabled=True,
+        arena_min_m=[-20, -20, 3],
+        arena_max_m=[20, 20, 10],
+        d_des_range_m=Range(1.8, 18.5),
+        h_des_range_m=Range(2.1, 9.1),
+        person_truth_m=[0.0, 0.0, 0.9],
+        person_estimate=estimate,
+        estimate_source_id=1,
+        tracking_error_m=0.5,
+    )
 
 
 @pytest.fixture

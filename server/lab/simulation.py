@@ -1,0 +1,251 @@
+"""The deterministic simulation runner: world + mission stepped in simulated time as fast as the CPU allows.
+
+Fixed control step 1 / rate_hz, physics on a 10 ms grid, one seed for everything: the same config gives the
+same report to the last digit, except the two timing metrics (tick_ms, realtime_factor), which are the only
+things that read the wall clock. `run_simulation(SimConfig) -> SimReport` is what `skyring sim` and the
+experiments' worker processes call.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from controller.params import FormationParams, Method
+from server.lab.metrics import Recorder, TickSample
+from vehicles.agent import AgentParams
+from vehicles.mission import MissionSnapshot, Phase, VehicleSnapshot
+from vehicles.sim.autopilot import SimAutopilot
+from vehicles.sim.scenario import Scenario, SimSetup, build_sim
+from vehicles.sim.trees import TreeSpec
+
+TIMING_METRICS = ("tick_ms", "realtime_factor")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """One headless run.
+
+    vehicles: K >= 1; duration_s: simulated seconds (> 0), warm-up included; seed: >= 0; method: active,
+    dqmpc or price; trees: "paper", "none" or a number N of random trees; comm_loss in [0, 1]; person:
+    paper, random or still; warmup_s: metrics start after this (0 <= warmup_s < duration_s; the default
+    covers takeoff, about 7 s, and settling); rate_hz: control rate (the paper: 100 Hz); d_des_m, h_des_m:
+    the operator's formation; start: ring or cluster (see vehicles.sim.scenario.Scenario); latency_s: link
+    latency; gps_drift: simulate self-localisation drift; virtual_obstacles: none or paper (the paper's 13
+    tree positions as virtual obstacles: avoided, not seen by the cameras; the paper's SE4); replan_hz: 0
+    solves every MAV's MPC every control tick (the paper), a positive rate (<= rate_hz) solves it at most that
+    often and follows the latest plan in between (vehicles.agent; for large teams, faster than real time).
+    """
+
+    vehicles: int = 3
+    duration_s: float = 60.0
+    seed: int = 0
+    method: str = "active"
+    trees: str = "paper"
+    comm_loss: float = 0.0
+    person: str = "paper"
+    warmup_s: float = 20.0
+    rate_hz: float = 100.0
+    d_des_m: float = 8.0
+    h_des_m: float = 8.0
+    start: str = "ring"
+    latency_s: float = 0.03
+    gps_drift: bool = True
+    virtual_obstacles: str = "none"
+    replan_hz: float = 0.0
+
+    def __post_init__(self) -> None:
+        vehicles = self.vehicles
+        if isinstance(vehicles, bool) or not isinstance(vehicles, int | np.integer) or vehicles < 1:
+            raise ValueError(f"vehicles must be an integer >= 1, got {self.vehicles!r}")
+        object.__setattr__(self, "vehicles", int(self.vehicles))
+        if not (
+            isinstance(self.duration_s, int | float)
+            and math.isfinite(self.duration_s)
+            and self.duration_s > 0
+        ):
+            raise ValueError(f"duration_s must be a positive number of seconds, got {self.duration_s!r}")
+        if not (isinstance(self.seed, int | np.integer) and self.seed >= 0):
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        object.__setattr__(self, "seed", int(self.seed))
+        try:
+            object.__setattr__(self, "method", Method(str(self.method).lower()).value)
+        except ValueError:
+            raise ValueError(
+                f"method must be one of {', '.join(m.value for m in Method)}, got {self.method!r}"
+            ) from None
+        object.__setattr__(self, "trees", str(TreeSpec.parse(str(self.trees))))
+        if not (isinstance(self.comm_loss, int | float) and 0.0 <= self.comm_loss <= 1.0):
+            raise ValueError(f"comm_loss must be a probability in [0, 1], got {self.comm_loss!r}")
+        if not (isinstance(self.warmup_s, int | float) and 0.0 <= self.warmup_s < self.duration_s):
+            raise ValueError(
+                f"warmup_s must be >= 0 and below duration_s ({self.duration_s}), got {self.warmup_s!r}"
+            )
+        if not (isinstance(self.rate_hz, int | float) and 1.0 <= self.rate_hz <= 1000.0):
+            raise ValueError(f"rate_hz must be between 1 and 1000, got {self.rate_hz!r}")
+        for name in ("d_des_m", "h_des_m"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number of metres, got {value!r}")
+        if not (
+            isinstance(self.replan_hz, int | float)
+            and (self.replan_hz == 0.0 or 0.0 < self.replan_hz <= self.rate_hz)
+        ):
+            raise ValueError(
+                f"replan_hz must be 0 (every tick) or in (0, rate_hz = {self.rate_hz}], "
+                f"got {self.replan_hz!r}"
+            )
+        self.scenario()  # person, start, latency: validated where they are defined
+
+    def scenario(self) -> Scenario:
+        """The world and team this config flies."""
+        return Scenario(
+            vehicles=self.vehicles,
+            seed=self.seed,
+            method=Method(self.method),
+            trees=self.trees,
+            person=self.person,
+            comm_loss=float(self.comm_loss),
+            latency_s=self.latency_s,
+            start=self.start,
+            gps_drift=self.gps_drift,
+            virtual_obstacles=self.virtual_obstacles,
+            formation=FormationParams(d_des_m=self.d_des_m, h_des_m=self.h_des_m),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True, eq=False)
+class SimReport:
+    """A run's config and metrics (server.lab.metrics names); `to_json()` is the report file."""
+
+    config: SimConfig
+    metrics: Mapping[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"config": self.config.to_dict(), "metrics": dict(self.metrics)}
+
+    def to_json(self) -> dict[str, Any]:
+        """The report as JSON-ready data: {"config": {...}, "metrics": {...}}."""
+        return json.loads(json.dumps(self.to_dict()))
+
+    def dumps(self) -> str:
+        """The report file's text."""
+        return json.dumps(self.to_dict(), indent=2) + "\n"
+
+
+def _sample(setup: SimSetup, snap: MissionSnapshot, t: float) -> TickSample:
+    person = np.asarray(snap.person_truth.position_m)
+    k = len(snap.vehicles)
+    estimates = np.full((k, 3), np.nan)
+    traces = np.full(k, np.nan)
+    for i, v in enumerate(snap.vehicles):
+        if v.person is not None:
+            estimates[i] = v.person.position_m
+            traces[i] = v.person.position_cov_trace_m2
+    return TickSample(
+        t_s=t,
+        positions_m=np.array([a.true_position_m for a in setup.autopilots]),
+        in_formation=np.array([v.phase == Phase.FORMATION for v in snap.vehicles]),
+        in_air=np.array([a.in_air for a in setup.autopilots]),
+        person_m=person,
+        estimates_m=estimates,
+        cov_traces_m2=traces,
+        d_des_m=snap.formation.d_des_m,
+        h_des_m=snap.formation.h_des_m,
+        believed_positions_m=np.array(
+            [_believed(v, a) for v, a in zip(snap.vehicles, setup.autopilots, strict=True)]
+        ),
+    )
+
+
+def _believed(vehicle: VehicleSnapshot, autopilot: SimAutopilot) -> np.ndarray:
+    """(3,) where the MAV thinks it is: its autopilot's self-localised position (the truth before the first
+    telemetry)."""
+    state = vehicle.autopilot
+    return np.asarray(state.position_m if state is not None else autopilot.true_position_m, dtype=float)
+
+
+def run_simulation(config: SimConfig, *, progress: Callable[[float], None] | None = None) -> SimReport:
+    """Run `config` headless and return its report. progress(t_s), if given, is called about once a
+    simulated second."""
+    replan_s = 1.0 / config.replan_hz if config.replan_hz > 0 else 0.0
+    setup = build_sim(
+        config.scenario(), clock=time.perf_counter, agent_params=AgentParams(replan_period_s=replan_s)
+    )
+    mission, world = setup.mission, setup.world
+    recorder = Recorder(obstacles=mission.obstacles())
+    steps = max(1, round(config.duration_s * config.rate_hz))
+    per_second = max(1, round(config.rate_hz))
+    ids = mission.vehicle_ids
+    wall0 = None
+    first = steps + 1
+    for i in range(1, steps + 1):
+        t = i / config.rate_hz
+        if wall0 is None and t >= config.warmup_s - 1e-9:
+            wall0, first = time.perf_counter(), i  # timing starts with the first measured tick
+        mission.step(t)
+        frames = world.drain_frames()
+        if wall0 is None:
+            continue
+        snap = mission.snapshot()
+        sample = _sample(setup, snap, t)
+        recorder.add_tick(sample)
+        formation = {vid for vid, f in zip(ids, sample.in_formation, strict=True) if f}
+        for f in frames:
+            if f.vehicle_id in formation and f.stamp_s >= config.warmup_s - 1e-9:
+                recorder.add_frame(
+                    in_frame=f.view.in_frame, center_offset_px=f.view.center_offset_px, detected=f.detected
+                )
+        for v in snap.vehicles:
+            if v.vehicle_id in formation and v.tick_s is not None:
+                recorder.add_tick_time(v.tick_s)
+        if progress is not None and i % per_second == 0:
+            progress(t)
+    wall_s = time.perf_counter() - wall0 if wall0 is not None else 0.0
+    metrics = recorder.metrics(sim_s=(steps - first + 1) / config.rate_hz, wall_s=wall_s)
+    metrics.update(_extras(setup, recorder.tracking_error_by_vehicle_m()))
+    return SimReport(config=config, metrics=metrics)
+
+
+def _extras(setup: SimSetup, errors_m: list[float | None]) -> dict[str, Any]:
+    """Counters: rejected inputs, link traffic, and per vehicle what its tracker fused."""
+    snap = setup.mission.snapshot()
+    links = setup.links.stats()
+    return {
+        "counters": {
+            "rejected_detections": snap.counters.rejected_detections,
+            "rejected_messages": snap.counters.rejected_messages,
+            "controller_errors": snap.counters.controller_errors,
+            "braking_ticks": snap.counters.braking_ticks,
+            "messages_sent": links.sent,
+            "messages_delivered": links.delivered,
+            "messages_dropped": links.dropped,
+            "failsafe_holds": sum(a.failsafe_holds for a in setup.autopilots),
+        },
+        "vehicles": [
+            {
+                "vehicle_id": v.vehicle_id,
+                "phase": v.phase.value,
+                "tracking_error_m_mean": errors_m[i] if i < len(errors_m) else None,
+                "own_detections_fused": v.counters.own_detections_fused,
+                "teammate_detections_fused": v.counters.teammate_detections_fused,
+                "slot_ticks": v.counters.slot_ticks,
+            }
+            for i, v in enumerate(snap.vehicles)
+        ],
+    }
+
+
+def without_timings(report: Mapping[str, Any]) -> dict[str, Any]:
+    """A report's JSON data with the wall-clock metrics removed (what determinism compares)."""
+    metrics = {k: v for k, v in report["metrics"].items() if k not in TIMING_METRICS}
+    return {"config": dict(report["config"]), "metrics": metrics}

@@ -1,0 +1,461 @@
+"""The ground station's core: owns a live `Mission`, runs its control ticks, validates every operator command
+before anything changes, and turns mission snapshots into the operator's view.
+
+The REST API and the viser GUI call the same methods here (it satisfies `webui.view.OperatorActions`), so
+there is one path for every command. Ticks and commands are serialised by one lock: viser calls back from
+its own threads, the API and the live runner from the asyncio loop. With a flight log attached
+(`attach_log`), every command with its outcome and a state sample every few ticks are recorded from here. The
+mission may fly any list of autopilots (the embedded simulation or PX4 vehicles): nothing here knows which.
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import logging
+import math
+import threading
+from collections.abc import Callable
+
+import numpy as np
+
+from controller.messages import Obstacle
+from server.flightlog.log import FlightLog
+from server.flightlog.records import LogCommand, LogSample, sample_from, scalar
+from server.station.commands import (
+    CommandError,
+    CommandLimits,
+    UnknownTargetError,
+    check_formation,
+    check_obstacle,
+    limits_from_params,
+)
+from vehicles.camera import CameraParams
+from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
+from webui.view import CameraView, Range, SceneView, VehicleView
+
+FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)
+
+log = logging.getLogger(__name__)
+
+
+def _recorded(method):
+    """An operator command whose every call goes to the flight log with its outcome (accepted, or refused with
+    the message the operator saw). The GUI and the API call the same methods, so this is the one place every
+    command passes through; it holds the station lock so the log orders commands and ticks as they ran."""
+    signature = inspect.signature(method)
+
+    @functools.wraps(method)
+    def command(self: GroundStation, *args, **kwargs):
+        with self._lock:
+            if self._log is None:
+                return method(self, *args, **kwargs)
+            try:
+                result = method(self, *args, **kwargs)
+            except Exception as exc:
+                message = str(exc) if isinstance(exc, CommandError) else f"{type(exc).__name__}: {exc}"
+                self._record_command(
+                    method.__name__,
+                    lambda: signature.bind(self, *args, **kwargs),
+                    accepted=False,
+                    message=message,
+                    result=None,
+                )
+                raise
+            self._record_command(
+                method.__name__,
+                lambda: signature.bind(self, *args, **kwargs),
+                accepted=True,
+                message="",
+                result=result,
+            )
+            return result
+
+    return command
+
+
+class GroundStation:
+    """One live mission under operator control.
+
+    control_period_s: seconds per tick. clock: None for a simulation (mission time starts at start_s and
+    advances by exactly one control period per tick, whatever the wall clock does); real vehicles pass the
+    monotonic clock their telemetry is stamped with, and each tick then runs at clock() (never going back).
+    link_stale_s: telemetry older than this is flagged stale. virtual_obstacle_height_m: height of the
+    cylinders the operator places (above the arena). on_shutdown: called after the landing commands when the
+    ground station stops (a back-end that must flush them or close links hooks in here).
+    """
+
+    def __init__(
+        self,
+        *,
+        mission: Mission,
+        control_period_s: float,
+        limits: CommandLimits | None = None,
+        start_s: float = 0.0,
+        clock: Callable[[], float] | None = None,
+        link_stale_s: float = 1.0,
+        virtual_obstacle_height_m: float = 12.0,
+        camera: CameraView | None = None,
+        on_shutdown: Callable[[], None] | None = None,
+    ) -> None:
+        if not (math.isfinite(control_period_s) and control_period_s > 0):
+            raise ValueError(f"control_period_s must be a positive number of seconds, got {control_period_s}")
+        self._mission = mission
+        self._period = float(control_period_s)
+        self._limits = limits or limits_from_params(mission.controller_params)
+        self._clock = clock
+        self._time = float(clock() if clock is not None else start_s)
+        self._on_shutdown = on_shutdown
+        self._stale_s = link_stale_s
+        self._obstacle_height_m = virtual_obstacle_height_m
+        self._camera = camera or camera_view(CameraParams())
+        self._lock = threading.RLock()
+        self._next_obstacle = 1
+        self._refused = 0
+        self._snapshot: MissionSnapshot | None = None
+        self._view: SceneView | None = None
+        self._log: FlightLog | None = None
+
+    # ---- time ---------------------------------------------------------------------------------------------
+    @property
+    def control_period_s(self) -> float:
+        return self._period
+
+    @property
+    def time_s(self) -> float:
+        return self._time
+
+    @property
+    def limits(self) -> CommandLimits:
+        return self._limits
+
+    @property
+    def mission(self) -> Mission:
+        return self._mission
+
+    @property
+    def lock(self) -> threading.RLock:
+        """Held by every tick and command; hold it to read several things from one instant."""
+        return self._lock
+
+    def tick(self) -> None:
+        """Run one control tick of the whole team, one control period after the previous one."""
+        with self._lock:
+            now = self._time + self._period if self._clock is None else max(self._clock(), self._time)
+            self._time = now
+            self._changed()
+            self._mission.step(now)
+            if self._log is not None and self._log.sample_due(now):
+                self._log.record_sample(self._sample)
+
+    # ---- flight log ---------------------------------------------------------------------------------------
+    def attach_log(self, flight_log: FlightLog) -> None:
+        """Record every operator command and a state sample every `flight_log.sample_period_s` of mission time
+        (the first one now) to `flight_log`. Its owner closes it; a failing log never stops a tick."""
+        with self._lock:
+            self._log = flight_log
+            flight_log.record_sample(self._sample)
+
+    def _sample(self) -> LogSample:
+        return sample_from(self.snapshot(), self.scene_view())
+
+    def _record_command(
+        self,
+        name: str,
+        bind: Callable[[], inspect.BoundArguments],
+        *,
+        accepted: bool,
+        message: str,
+        result: object,
+    ) -> None:
+        try:
+            arguments = tuple((k, scalar(v)) for k, v in bind().arguments.items() if k != "self")
+            text = (
+                None
+                if result is None
+                else ",".join(map(str, result))
+                if isinstance(result, list)
+                else str(result)
+            )
+            command = LogCommand(
+                time_s=self._time,
+                name=name,
+                arguments=arguments,
+                accepted=accepted,
+                message=message,
+                result=text,
+            )
+        except Exception:  # noqa: BLE001 - the log must never change a command's outcome
+            log.exception("recording the %s command failed", name)
+            return
+        self._log.record_command(command)
+
+    # ---- reading ------------------------------------------------------------------------------------------
+    def snapshot(self) -> MissionSnapshot:
+        """The mission now (cached until the next tick or command)."""
+        with self._lock:
+            if self._snapshot is None:
+                self._snapshot = self._mission.snapshot()
+            return self._snapshot
+
+    def scene_view(self) -> SceneView:
+        """What the operator sees now (cached until the next tick or command)."""
+        with self._lock:
+            if self._view is None:
+                self._view = scene_view(
+                    self.snapshot(), limits=self._limits, link_stale_s=self._stale_s, camera=self._camera
+                )
+            return self._view
+
+    def counters(self) -> dict[str, int]:
+        """Bad inputs refused and counted so far: operator commands (here and in the mission), detections the
+        trackers rejected, malformed messages, controller exceptions, braking ticks."""
+        c = self.snapshot().counters
+        return {
+            "refused_commands": self._refused + c.rejected_actions,
+            "rejected_detections": c.rejected_detections,
+            "rejected_messages": c.rejected_messages,
+            "controller_errors": c.controller_errors,
+            "braking_ticks": c.braking_ticks,
+        }
+
+    # ---- operator commands (webui.view.OperatorActions) ---------------------------------------------------
+    @_recorded
+    def set_formation(self, *, d_des_m: float, h_des_m: float) -> None:
+        """Set d_des and h_des for every MAV (CommandError with the allowed range if outside it)."""
+        with self._lock:
+            formation = self._checked(
+                lambda: check_formation(
+                    d_des_m=d_des_m, h_des_m=h_des_m, limits=self._limits, team_size=self._team_size()
+                )
+            )
+            self._apply(lambda: self._mission.set_formation(formation))
+
+    @_recorded
+    def add_obstacle(self, *, x_m: float, y_m: float, radius_m: float) -> str:
+        """Add a virtual obstacle at ENU (x_m, y_m); returns its id ("v1", "v2", ...)."""
+        with self._lock:
+            snap = self.snapshot()
+            vehicles = {
+                v.vehicle_id: v.autopilot.position_m for v in snap.vehicles if v.autopilot is not None
+            }
+            persons = [
+                v.person.position_m
+                for v in snap.vehicles
+                if v.person is not None and np.all(np.isfinite(v.person.position_m))
+            ]
+            if snap.person_truth is not None:
+                persons.insert(0, snap.person_truth.position_m)
+            x, y, r = self._checked(
+                lambda: check_obstacle(
+                    x_m=x_m,
+                    y_m=y_m,
+                    radius_m=radius_m,
+                    limits=self._limits,
+                    vehicles_m=vehicles,
+                    persons_m=persons,
+                    virtual_count=len(snap.virtual_obstacle_ids),
+                )
+            )
+            taken = {o.obstacle_id for o in snap.obstacles}
+            while f"v{self._next_obstacle}" in taken:
+                self._next_obstacle += 1
+            obstacle = Obstacle(
+                obstacle_id=f"v{self._next_obstacle}",
+                center_m=np.array([x, y]),
+                radius_m=r,
+                height_m=self._obstacle_height_m,
+                kind="virtual",
+            )
+            self._apply(lambda: self._mission.add_obstacle(obstacle))
+            self._next_obstacle += 1
+            return obstacle.obstacle_id
+
+    @_recorded
+    def remove_obstacle(self, obstacle_id: str) -> None:
+        """Remove a virtual obstacle (UnknownTargetError if there is none by that id; trees stay)."""
+        with self._lock:
+            known = {o.obstacle_id: o for o in self.snapshot().obstacles}
+            if obstacle_id not in known:
+                self._refuse(
+                    UnknownTargetError(
+                        f"no obstacle with id {obstacle_id!r}; virtual obstacles are "
+                        f"{list(self.snapshot().virtual_obstacle_ids)}"
+                    )
+                )
+            if known[obstacle_id].kind != "virtual":
+                self._refuse(
+                    CommandError(
+                        f"obstacle {obstacle_id!r} is a {known[obstacle_id].kind}, part of "
+                        "the map: only virtual obstacles can be removed"
+                    )
+                )
+            self._apply(lambda: self._mission.remove_obstacle(obstacle_id))
+
+    @_recorded
+    def land(self, vehicle_id: int) -> None:
+        """Land one MAV where it is; it leaves formation control until released."""
+        with self._lock:
+            self._vehicle(vehicle_id)
+            self._apply(lambda: self._mission.land(vehicle_id))
+
+    @_recorded
+    def land_all(self) -> list[int]:
+        """Land every MAV that is taking off or flying; returns their ids."""
+        with self._lock:
+            flying = [v.vehicle_id for v in self.snapshot().vehicles if v.phase in FLYING_PHASES]
+            self._apply(self._mission.land_all)
+            return flying
+
+    @_recorded
+    def release(self, vehicle_id: int) -> None:
+        """Give a landed MAV back to the formation (it takes off again while formation is enabled).
+
+        Refused if the current d_des would space the enlarged team closer than the formation spacing allows.
+        """
+        with self._lock:
+            vehicle = self._vehicle(vehicle_id)
+            if vehicle.phase == Phase.LANDED:
+                team = self._team_size() + 1
+                low, high = self._limits.d_des_range_m(team)
+                d_des = self.snapshot().formation.d_des_m
+                if not low <= d_des <= high:
+                    self._refuse(
+                        CommandError(
+                            f"with MAV {vehicle_id} back there would be {team} MAVs in formation, which "
+                            f"needs d_des between {low:g} and {high:g} m (now {d_des:g} m): change d_des "
+                            "first"
+                        )
+                    )
+            self._apply(lambda: self._mission.release(vehicle_id))
+
+    @_recorded
+    def set_formation_enabled(self, enabled: bool) -> None:
+        """Start (True) or stop (False: every MAV holds position) formation control."""
+        with self._lock:
+            if not isinstance(enabled, bool):
+                self._refuse(CommandError(f"enabled must be true or false, got {enabled!r}"))
+            self._apply(lambda: self._mission.set_formation_enabled(enabled))
+
+    @_recorded
+    def shutdown(self) -> None:
+        """Land every flying MAV, then run on_shutdown (called when the ground station stops)."""
+        with self._lock:
+            try:
+                self._mission.land_all()
+            finally:
+                self._changed()
+                if self._on_shutdown is not None:
+                    self._on_shutdown()
+
+    # ---- internals ----------------------------------------------------------------------------------------
+    def _team_size(self) -> int:
+        return sum(v.phase in FLYING_PHASES for v in self.snapshot().vehicles)
+
+    def _vehicle(self, vehicle_id: int) -> VehicleSnapshot:
+        for v in self.snapshot().vehicles:
+            if isinstance(vehicle_id, int) and v.vehicle_id == vehicle_id:
+                return v
+        ids = [v.vehicle_id for v in self.snapshot().vehicles]
+        self._refuse(UnknownTargetError(f"no vehicle with id {vehicle_id!r}; vehicles are {ids}"))
+        raise AssertionError("unreachable")
+
+    def _checked(self, check):
+        try:
+            return check()
+        except CommandError:
+            self._refused += 1
+            raise
+
+    def _refuse(self, error: CommandError) -> None:
+        self._refused += 1
+        raise error
+
+    def _apply(self, action) -> None:
+        """Run a mission action; the mission refuses with MissionError before changing anything."""
+        try:
+            action()
+        except MissionError as exc:
+            raise CommandError(str(exc)) from None
+        finally:
+            self._changed()
+
+    def _changed(self) -> None:
+        self._snapshot = None
+        self._view = None
+
+
+def camera_view(params: CameraParams) -> CameraView:
+    """The frustum drawn for a camera: vertical field of view 2 atan(height / (2 fy)), aspect width/height."""
+    return CameraView(
+        vertical_fov_rad=2.0 * math.atan(params.height_px / (2.0 * params.fy_px)),
+        aspect=params.width_px / params.height_px,
+        pitch_down_rad=params.pitch_down_rad,
+        forward_offset_m=params.offset_forward_m,
+    )
+
+
+def vehicle_view(v: VehicleSnapshot, *, link_stale_s: float) -> VehicleView:
+    """One vehicle as the operator sees it (the autopilot's reported pose; stale when telemetry is old)."""
+    s = v.autopilot
+    age = v.link_age_s if v.link_age_s is not None else math.inf
+    plan = v.plan.positions_m if v.plan is not None else np.zeros((0, 3))
+    return VehicleView(
+        vehicle_id=v.vehicle_id,
+        phase=v.phase.value,
+        mode=s.mode.value if s is not None else "unknown",
+        armed=bool(s.armed) if s is not None else False,
+        in_air=bool(s.in_air) if s is not None else False,
+        in_formation=v.phase == Phase.FORMATION,
+        position_m=s.position_m if s is not None else np.zeros(3),
+        yaw_rad=s.yaw_rad if s is not None else 0.0,
+        link_age_s=age,
+        link_stale=age > link_stale_s or (s is not None and s.link_lost),
+        solve_status=v.status.value if v.status is not None else "",
+        solver_time_s=v.solver_time_s if v.status is not None else None,
+        battery_fraction=s.battery_fraction if s is not None else None,
+        plan_positions_m=plan,
+    )
+
+
+def scene_view(
+    snap: MissionSnapshot,
+    *,
+    limits: CommandLimits,
+    link_stale_s: float = 1.0,
+    camera: CameraView | None = None,
+) -> SceneView:
+    """Adapt a mission snapshot to the operator's view.
+
+    The drawn estimate is the tracker replica with the smallest position-covariance trace (the best-informed
+    MAV); the tracking error is the mean over MAVs with an estimate of |estimate - truth| (simulation only).
+    """
+    estimates = [
+        (v.person.position_cov_trace_m2, v.vehicle_id, v.person)
+        for v in snap.vehicles
+        if v.person is not None and np.all(np.isfinite(v.person.cov))
+    ]
+    best = min(estimates, key=lambda e: (e[0], e[1])) if estimates else None
+    truth = snap.person_truth.position_m if snap.person_truth is not None else None
+    error = None
+    if truth is not None and estimates:
+        error = float(np.mean([np.linalg.norm(e[2].position_m - truth) for e in estimates]))
+    team = sum(v.phase in FLYING_PHASES for v in snap.vehicles)
+    d_range, h_range = limits.d_des_range_m(max(team, 1)), limits.h_des_range_m()
+    return SceneView(
+        time_s=snap.stamp_s,
+        vehicles=tuple(vehicle_view(v, link_stale_s=link_stale_s) for v in snap.vehicles),
+        obstacles=snap.obstacles,
+        formation=snap.formation,
+        formation_enabled=snap.formation_enabled,
+        arena_min_m=np.array(limits.arena_min_m),
+        arena_max_m=np.array(limits.arena_max_m),
+        d_des_range_m=Range(*d_range),
+        h_des_range_m=Range(*h_range),
+        obstacle_radius_range_m=Range(0.1, limits.max_obstacle_radius_m),
+        person_truth_m=truth,
+        person_estimate=best[2] if best else None,
+        estimate_source_id=best[1] if best else None,
+        tracking_error_m=error,
+        camera=camera or CameraView(),
+    )

@@ -1,0 +1,252 @@
+"""Running the ground station live: pacing control ticks against the wall clock, and serving the API and the
+operator page beside them in one asyncio loop.
+
+`LiveRunner` advances the station `speed` simulated seconds per wall second in batches short enough that the
+API and the WebSocket stay responsive; when the CPU cannot keep up it re-anchors instead of spiralling and
+counts it. `serve_station` runs viser, uvicorn and the runner until stopped (SIGINT/SIGTERM or an event),
+then lands every MAV and closes the back-ends in a `finally`, whatever stopped it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import logging
+import signal
+import socket
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import uvicorn
+
+log = logging.getLogger(__name__)
+
+
+class Steppable(Protocol):
+    """What the runner paces: a fixed control period and one tick at a time."""
+
+    @property
+    def control_period_s(self) -> float: ...
+
+    @property
+    def time_s(self) -> float: ...
+
+    def tick(self) -> None:
+        """Advance by one control period."""
+
+
+@dataclass
+class PaceStats:
+    """How the live run kept up: ticks run, times the runner fell behind by more than max_lag_s and
+    re-anchored, and the achieved simulated seconds per wall second since the start."""
+
+    ticks: int = 0
+    lagged: int = 0
+    tick_errors: int = 0
+    achieved_speed: float = 0.0
+
+
+class LiveRunner:
+    """Paces `station.tick()` at `speed` x real time and calls `on_frame` every frame_period_s of wall time.
+
+    max_batch_s: the longest stretch of ticks between two yields to the event loop; max_lag_s: simulated
+    seconds the run may fall behind before it gives up catching up (it then runs slower than asked, never in
+    bursts). clock and sleep are injectable for tests.
+    """
+
+    def __init__(
+        self,
+        *,
+        station: Steppable,
+        speed: float = 1.0,
+        on_frame: Callable[[], None] | None = None,
+        frame_period_s: float = 0.1,
+        max_batch_s: float = 0.02,
+        max_lag_s: float = 0.5,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
+    ) -> None:
+        if not (speed > 0.0 and speed < 1e6):
+            raise ValueError(f"speed must be a positive factor of real time, got {speed}")
+        self._station = station
+        self._speed = speed
+        self._on_frame = on_frame
+        self._frame_period_s = frame_period_s
+        self._max_batch_s = max_batch_s
+        self._max_lag_s = max_lag_s
+        self._clock = clock
+        self._sleep = sleep
+        self.stats = PaceStats()
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Tick until `stop` is set."""
+        period = self._station.control_period_s
+        wall0 = start_wall = self._clock()
+        sim0 = start_sim = self._station.time_s
+        next_frame = wall0
+        while not stop.is_set():
+            target = sim0 + self._speed * (self._clock() - wall0)
+            batch_start = self._clock()
+            while self._station.time_s + period <= target + 1e-9:
+                self._tick()
+                if self._clock() - batch_start > self._max_batch_s:
+                    break
+            if target - self._station.time_s > self._max_lag_s:
+                wall0, sim0 = self._clock(), self._station.time_s
+                self.stats.lagged += 1
+            now = self._clock()
+            if now - start_wall > 0:
+                self.stats.achieved_speed = (self._station.time_s - start_sim) / (now - start_wall)
+            if now >= next_frame:
+                self._frame()
+                next_frame = now + self._frame_period_s
+            next_tick = wall0 + (self._station.time_s + period - sim0) / self._speed
+            await self._sleep(max(0.0, min(next_tick, next_frame) - self._clock()))
+
+    def _tick(self) -> None:
+        try:
+            self._station.tick()
+        except Exception:  # noqa: BLE001 - the live loop must survive a failing tick; it is counted and logged
+            self.stats.tick_errors += 1
+            if self.stats.tick_errors <= 10 or self.stats.tick_errors % 1000 == 0:
+                log.exception("control tick failed (%d so far)", self.stats.tick_errors)
+        self.stats.ticks += 1
+
+    def _frame(self) -> None:
+        if self._on_frame is None:
+            return
+        try:
+            self._on_frame()
+        except Exception:  # noqa: BLE001 - a drawing problem must not stop the MAVs' control
+            log.exception("publishing a frame failed")
+
+
+def bind_port(host: str, port: int) -> tuple[socket.socket, bool]:
+    """A listening TCP socket on (host, port), or on a free port if that one is taken. Returns (socket,
+    fell_back)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    for candidate, fell_back in ((port, False), (0, True)):
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, candidate))
+        except OSError as exc:
+            sock.close()
+            if exc.errno != errno.EADDRINUSE or candidate == 0:
+                raise
+            continue
+        sock.listen(128)
+        sock.setblocking(False)
+        return sock, fell_back
+    raise AssertionError("unreachable")
+
+
+class _QuietServer(uvicorn.Server):
+    """uvicorn that leaves signals to us: uvicorn 0.54 installs its own handlers and re-raises the signal
+    after serve() returns, which would skip our shutdown (landing) and exit with the signal."""
+
+    @contextlib.contextmanager
+    def capture_signals(self):  # type: ignore[override]
+        yield
+
+
+@dataclass(frozen=True)
+class Urls:
+    """Where the operator finds the ground station: the landing page/API and the viser page."""
+
+    api: str
+    operator: str
+    api_fell_back: bool = False
+    viser_fell_back: bool = False
+
+
+def url_host(host: str) -> str:
+    """The host to print in a URL for a bind address (0.0.0.0 and :: mean this machine)."""
+    return "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
+
+
+async def serve_station(
+    station,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8000,
+    viser_port: int = 8080,
+    speed: float = 1.0,
+    frame_period_s: float = 0.1,
+    stop: asyncio.Event | None = None,
+    on_ready: Callable[[Urls, object], None] | None = None,
+    handle_signals: bool = True,
+) -> PaceStats:
+    """Run the ground station (viser page, FastAPI app, paced control ticks) until `stop` is set or
+    SIGINT/SIGTERM arrives; then land every MAV and close the back-ends. Returns how the run kept up with
+    real time.
+
+    `station` is a `server.station.ground_station.GroundStation` over any list of autopilots (the embedded
+    simulation or PX4 vehicles). on_ready(urls, ui) is called once when both servers listen (ui: the
+    `webui.app.OperatorUi`, for callers that inspect the scene).
+    """
+    from server.station.api import create_app  # FastAPI/viser load only when serving
+    from webui.app import OperatorUi
+
+    stop = stop or asyncio.Event()
+    loop = asyncio.get_running_loop()
+    installed: list[int] = []
+    if handle_signals and threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+            installed.append(sig)
+    ui = None
+    server = None
+    serve_task = None
+    try:
+        ui = OperatorUi(actions=station, initial=station.scene_view(), host=host, port=viser_port)
+        sock, api_fell_back = bind_port(host, port)
+        app = create_app(station, viser_port=ui.port)
+        config = uvicorn.Config(app, log_level="warning", lifespan="off", ws="websockets-sansio")
+        server = _QuietServer(config)
+        serve_task = asyncio.create_task(server.serve(sockets=[sock]))
+        while not server.started:
+            if serve_task.done():
+                serve_task.result()
+            await asyncio.sleep(0.02)
+        api_port = sock.getsockname()[1]
+        urls = Urls(
+            api=f"http://{url_host(host)}:{api_port}/",
+            operator=f"http://{url_host(host)}:{ui.port}/",
+            api_fell_back=api_fell_back,
+            viser_fell_back=viser_port not in (0, ui.port),
+        )
+        if on_ready is not None:
+            on_ready(urls, ui)
+        runner = LiveRunner(
+            station=station,
+            speed=speed,
+            frame_period_s=frame_period_s,
+            on_frame=lambda: ui.publish(station.scene_view()),
+        )
+        runner_task = asyncio.create_task(runner.run(stop))
+        stop_task = asyncio.create_task(stop.wait())
+        await asyncio.wait({runner_task, serve_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)
+        stop.set()
+        await runner_task
+        stop_task.cancel()
+        if serve_task.done() and not serve_task.cancelled() and serve_task.exception() is not None:
+            raise serve_task.exception()
+        return runner.stats
+    finally:
+        for sig in installed:
+            loop.remove_signal_handler(sig)
+        try:
+            station.shutdown()
+        finally:
+            if server is not None:
+                server.should_exit = True
+            if serve_task is not None:
+                with contextlib.suppress(Exception, asyncio.CancelledError):
+                    await asyncio.wait_for(serve_task, timeout=5.0)
+            if ui is not None:
+                ui.stop()

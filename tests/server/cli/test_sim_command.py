@@ -1,0 +1,82 @@
+"""`skyring sim`: arguments, the printed table, the JSON report, one-line errors."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from server.cli.sim import START_LAYOUTS
+from vehicles.sim.scenario import START_LAYOUTS as SCENARIO_START_LAYOUTS
+
+SKYRING = [sys.executable, "-c", "from server.cli import main; main()"]
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def _skyring(*args):
+    return subprocess.run([*SKYRING, *args], capture_output=True, text=True, cwd=ROOT, timeout=300)
+
+
+def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
+    path = tmp_path / "report.json"
+    done = _skyring(
+        "sim",
+        "--headless",
+        "--vehicles",
+        "2",
+        "--duration",
+        "12",
+        "--warmup",
+        "10",
+        "--rate",
+        "10",
+        "--seed",
+        "3",
+        "--trees",
+        "none",
+        "--person",
+        "still",
+        "--report",
+        str(path),
+    )
+    assert done.returncode == 0, done.stderr
+    assert "tracking error" in done.stdout and "real-time factor" in done.stdout
+    report = json.loads(path.read_text())
+    assert set(report) == {"config", "metrics"}
+    assert report["config"]["vehicles"] == 2 and report["config"]["trees"] == "none"
+    assert report["config"]["rate_hz"] == 10.0 and report["config"]["seed"] == 3
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (["--vehicles", "0"], "--vehicles"),
+        (["--vehicles", "three"], "--vehicles"),
+        (["--duration", "-5"], "--duration"),
+        (["--comm-loss", "1.5"], "--comm-loss"),
+        (["--comm-loss", "-0.1"], "--comm-loss"),
+        (["--method", "magic"], "--method"),
+        (["--trees", "forest"], "--trees"),
+        (["--person", "dancing"], "--person"),
+        (["--warmup", "90", "--duration", "60"], "--warmup"),
+        (["--replan-rate", "500"], "--replan-rate"),
+    ],
+)
+def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option):
+    done = _skyring("sim", "--headless", *args)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert option in lines[0] and lines[0].startswith("Error: ")
+    assert done.stdout == ""
+
+
+def test_without_headless_it_points_to_skyring_serve():
+    done = _skyring("sim")
+    assert done.returncode == 2
+    assert "skyring serve" in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+def test_the_command_knows_the_same_start_layouts_as_the_scenario():
+    assert START_LAYOUTS == SCENARIO_START_LAYOUTS

@@ -1,0 +1,119 @@
+"""Pacing of the live runner, on a simulated clock: speed, falling behind, failing ticks, frames."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from server.station.live import LiveRunner, bind_port
+
+
+class FakeClock:
+    """Wall time that advances only when the runner sleeps or a tick costs time."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    async def sleep(self, seconds: float) -> None:
+        self.now += seconds
+        await asyncio.sleep(0)
+
+
+class CountingStation:
+    """A station whose tick costs `tick_cost_s` of wall time and may raise."""
+
+    def __init__(
+        self, clock: FakeClock, *, period_s: float = 0.05, tick_cost_s: float = 0.0, fail_every: int = 0
+    ) -> None:
+        self.clock = clock
+        self.control_period_s = period_s
+        self.time_s = 0.0
+        self.tick_cost_s = tick_cost_s
+        self.fail_every = fail_every
+        self.calls = 0
+
+    def tick(self) -> None:
+        self.calls += 1
+        self.clock.now += self.tick_cost_s
+        self.time_s += self.control_period_s
+        if self.fail_every and self.calls % self.fail_every == 0:
+            raise RuntimeError("a failing tick")
+
+
+async def run_for(runner: LiveRunner, clock: FakeClock, wall_s: float) -> None:
+    stop = asyncio.Event()
+
+    async def stopper() -> None:
+        while clock.now < wall_s:
+            await asyncio.sleep(0)
+        stop.set()
+
+    await asyncio.gather(runner.run(stop), stopper())
+
+
+@pytest.mark.parametrize("speed", [1.0, 4.0])
+async def test_simulated_time_runs_at_speed_times_wall_time(speed):
+    clock = FakeClock()
+    station = CountingStation(clock)
+    runner = LiveRunner(station=station, speed=speed, clock=clock, sleep=clock.sleep)
+    await run_for(runner, clock, 10.0)
+    assert station.time_s == pytest.approx(speed * 10.0, abs=2 * station.control_period_s)
+    assert runner.stats.lagged == 0
+
+
+async def test_a_runner_that_cannot_keep_up_slows_down_instead_of_bursting():
+    clock = FakeClock()
+    station = CountingStation(clock, tick_cost_s=0.1)  # each 0.05 s tick costs 0.1 s of wall time
+    runner = LiveRunner(station=station, speed=1.0, clock=clock, sleep=clock.sleep)
+    await run_for(runner, clock, 10.0)
+    assert runner.stats.achieved_speed == pytest.approx(0.5, abs=0.05)
+    assert runner.stats.lagged > 0
+
+
+async def test_failing_ticks_are_counted_and_the_loop_goes_on():
+    clock = FakeClock()
+    station = CountingStation(clock, fail_every=3)
+    runner = LiveRunner(station=station, speed=1.0, clock=clock, sleep=clock.sleep)
+    await run_for(runner, clock, 3.0)
+    assert runner.stats.ticks == station.calls == pytest.approx(60, abs=2)
+    assert runner.stats.tick_errors == station.calls // 3
+
+
+async def test_frames_are_published_every_frame_period_even_if_publishing_fails():
+    clock = FakeClock()
+    frames: list[float] = []
+
+    def publish() -> None:
+        frames.append(clock.now)
+        raise RuntimeError("a drawing bug")
+
+    runner = LiveRunner(
+        station=CountingStation(clock),
+        speed=1.0,
+        on_frame=publish,
+        frame_period_s=0.1,
+        clock=clock,
+        sleep=clock.sleep,
+    )
+    await run_for(runner, clock, 2.0)
+    assert len(frames) == pytest.approx(20, abs=1)
+
+
+def test_a_non_positive_speed_is_refused():
+    with pytest.raises(ValueError, match="speed must be a positive factor"):
+        LiveRunner(station=CountingStation(FakeClock()), speed=0.0)
+
+
+def test_a_busy_port_falls_back_to_a_free_one():
+    taken, _ = bind_port("127.0.0.1", 0)
+    try:
+        port = taken.getsockname()[1]
+        sock, fell_back = bind_port("127.0.0.1", port)
+        assert fell_back and sock.getsockname()[1] not in (0, port)
+        sock.close()
+    finally:
+        taken.close()

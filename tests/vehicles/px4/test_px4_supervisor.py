@@ -1,0 +1,218 @@
+"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release (vehicles/px4_supervisor)."""
+
+from __future__ import annotations
+
+import pytest
+
+from vehicles.autopilot import FlightMode
+from vehicles.px4.supervisor import Command, Engagement, Observation, OffboardSupervisor, SupervisorParams
+
+P = SupervisorParams(hold_after_s=0.5, land_after_s=3.0, prestream_s=1.0, retry_after_s=1.0, mode_grace_s=1.0)
+
+
+def obs(t, mode=FlightMode.HOLD, *, armed=True, in_air=True, link_lost=False):
+    return Observation(now_s=t, mode=mode, armed=armed, in_air=in_air, link_lost=link_lost)
+
+
+def run(sup, t0, t1, mode, *, setpoints=True, dt=0.05, **kw):
+    """Step from t0 to t1 at dt, feeding a set-point every step when `setpoints`; the commands issued."""
+    commands = []
+    n = round((t1 - t0) / dt)
+    for i in range(n):
+        t = t0 + i * dt
+        if setpoints:
+            sup.note_setpoint(t)
+        c = sup.step(obs(t, mode, **kw))
+        if c is not None:
+            commands.append((round(t, 3), c))
+    return commands
+
+
+def following(t=0.0):
+    """A supervisor that took off and entered offboard; returns it and the time reached."""
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    assert sup.step(obs(t, FlightMode.READY, armed=False, in_air=False)) is Command.TAKEOFF
+    run(sup, t + 0.05, t + 1.5, FlightMode.HOLD, setpoints=False)
+    assert sup.engagement is Engagement.ENGAGING
+    cmds = run(sup, t + 1.5, t + 3.0, FlightMode.HOLD)
+    assert [c for _, c in cmds] == [Command.START_OFFBOARD]
+    run(sup, t + 3.0, t + 3.5, FlightMode.OFFBOARD)
+    assert sup.engagement is Engagement.FOLLOWING
+    return sup, t + 3.5
+
+
+def test_takeoff_request_on_the_ground_issues_one_takeoff():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(6.0)
+    sup.request_takeoff(6.0)  # the mission re-sends it while telemetry catches up
+    assert sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False)) is Command.TAKEOFF
+    sup.request_takeoff(6.0)
+    assert run(sup, 0.05, 2.0, FlightMode.TAKEOFF, setpoints=False) == []
+    assert sup.takeoff_height_m == 6.0
+
+
+def test_offboard_starts_only_after_prestreaming_for_prestream_s():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    run(sup, 0.05, 1.5, FlightMode.HOLD, setpoints=False)  # takeoff done: PX4 holds
+    cmds = run(sup, 1.5, 3.0, FlightMode.HOLD)
+    assert cmds == [(2.5, Command.START_OFFBOARD)]
+
+
+def test_setpoints_are_forwarded_while_engaging_and_following_only():
+    sup = OffboardSupervisor(P)
+    assert not sup.note_setpoint(0.0)  # on the ground: ignored and counted
+    assert sup.ignored_setpoints == 1
+    assert not sup.forwarding
+    sup, _ = following()
+    assert sup.forwarding
+
+
+def test_stale_agent_output_holds_after_hold_after_s():
+    sup, t = following()
+    cmds = run(sup, t, t + 1.0, FlightMode.OFFBOARD, setpoints=False)  # last set-point at t - 0.05
+    assert cmds == [(pytest.approx(t + 0.5), Command.HOLD)]
+    assert sup.engagement is Engagement.WATCHDOG_HOLD
+    assert sup.watchdog_holds == 1
+
+
+def test_stale_agent_output_lands_after_land_after_s():
+    sup, t = following()
+    cmds = run(sup, t, t + 0.6, FlightMode.OFFBOARD, setpoints=False)
+    cmds += run(sup, t + 0.6, t + 4.0, FlightMode.HOLD, setpoints=False)
+    assert [c for _, c in cmds] == [Command.HOLD, Command.LAND]
+    assert cmds[1][0] == pytest.approx(t + 3.0)
+    assert sup.engagement is Engagement.LANDING
+    assert sup.watchdog_landings == 1
+
+
+def test_fresh_output_after_a_watchdog_hold_reengages_after_prestreaming():
+    sup, t = following()
+    run(sup, t, t + 0.6, FlightMode.OFFBOARD, setpoints=False)
+    run(sup, t + 0.6, t + 1.0, FlightMode.HOLD, setpoints=False)
+    cmds = run(sup, t + 1.0, t + 2.5, FlightMode.HOLD)
+    assert [c for _, c in cmds] == [Command.START_OFFBOARD]
+    assert cmds[0][0] == pytest.approx(t + 2.0)
+
+
+def test_pilot_mode_change_releases_without_fighting():
+    sup, t = following()
+    cmds = run(sup, t, t + 5.0, FlightMode.MANUAL)
+    assert cmds == []
+    assert sup.engagement is Engagement.RELEASED
+    assert "manual" in sup.released_reason
+    assert not sup.forwarding
+    assert not sup.note_setpoint(t + 5.0)
+
+
+def test_px4_failsafe_hold_releases_too():
+    sup, t = following()
+    assert run(sup, t, t + 1.0, FlightMode.HOLD) == []
+    assert sup.released
+
+
+def test_mode_lagging_behind_a_command_is_not_read_as_a_takeover():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    run(sup, 0.05, 1.5, FlightMode.HOLD, setpoints=False)
+    run(sup, 1.5, 2.55, FlightMode.HOLD)  # START_OFFBOARD at 2.5
+    run(sup, 2.55, 3.3, FlightMode.HOLD)  # heartbeat still says Hold for < mode_grace_s
+    assert sup.engagement is Engagement.ENGAGING
+
+
+def test_released_vehicle_reengages_on_takeoff_request_in_the_air():
+    sup, t = following()
+    run(sup, t, t + 2.0, FlightMode.MANUAL)
+    sup.request_takeoff(5.0)
+    assert sup.step(obs(t + 2.0, FlightMode.MANUAL)) is None
+    assert sup.engagement is Engagement.ENGAGING
+    assert sup.released_reason is None
+
+
+def test_land_request_is_latched_and_ignores_setpoints():
+    sup, t = following()
+    sup.request_land()
+    assert sup.step(obs(t, FlightMode.OFFBOARD)) is Command.LAND
+    assert not sup.note_setpoint(t + 0.1)
+    sup.request_takeoff(5.0)  # no takeoff while landing in the air
+    assert run(sup, t + 0.05, t + 1.0, FlightMode.LAND, setpoints=False) == []
+    assert sup.engagement is Engagement.LANDING
+
+
+def test_lost_land_command_is_sent_again():
+    sup, t = following()
+    sup.request_land()
+    sup.step(obs(t, FlightMode.OFFBOARD))
+    cmds = run(sup, t + 0.05, t + 2.5, FlightMode.OFFBOARD, setpoints=False)
+    assert [c for _, c in cmds] == [Command.LAND]
+    assert cmds[0][0] == pytest.approx(t + 2.0)
+
+
+def test_landing_ends_idle_once_down_and_disarmed():
+    sup, t = following()
+    sup.request_land()
+    sup.step(obs(t, FlightMode.OFFBOARD))
+    sup.step(obs(t + 5.0, FlightMode.READY, armed=False, in_air=False))
+    assert sup.engagement is Engagement.IDLE
+
+
+def test_operator_hold_then_new_setpoints_follow_again():
+    sup, t = following()
+    sup.request_hold()
+    assert sup.step(obs(t, FlightMode.OFFBOARD)) is Command.HOLD
+    assert sup.engagement is Engagement.HOLDING
+    cmds = run(sup, t + 0.05, t + 1.5, FlightMode.HOLD)
+    assert [c for _, c in cmds] == [Command.START_OFFBOARD]
+
+
+def test_failed_takeoff_returns_to_idle_so_it_can_be_asked_again():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    sup.command_failed(Command.TAKEOFF)
+    assert sup.engagement is Engagement.IDLE
+    sup.request_takeoff(5.0)
+    assert sup.step(obs(1.0, FlightMode.READY, armed=False, in_air=False)) is Command.TAKEOFF
+
+
+def test_no_offboard_start_while_the_link_is_lost():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    run(sup, 0.05, 1.5, FlightMode.HOLD, setpoints=False)
+    assert run(sup, 1.5, 4.0, FlightMode.HOLD, link_lost=True) == []
+
+
+@pytest.mark.parametrize(
+    "kw", [{"hold_after_s": 0.0}, {"hold_after_s": 2.0, "land_after_s": 1.0}, {"prestream_s": -1.0}]
+)
+def test_params_reject_inconsistent_limits(kw):
+    with pytest.raises(ValueError):
+        SupervisorParams(**kw)
+
+
+def test_setpoints_held_back_during_takeoff_do_not_count_as_prestreaming():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    run(sup, 0.05, 1.0, FlightMode.TAKEOFF)  # the agent starts early; nothing is forwarded while climbing
+    cmds = run(sup, 1.0, 3.0, FlightMode.HOLD)  # engaged at 1.0 (after the mode grace): pre-stream from there
+    assert cmds == [(2.0, Command.START_OFFBOARD)]
+
+
+def test_land_request_is_not_sent_while_a_pilot_flies_the_released_vehicle():
+    sup, t = following()
+    run(sup, t, t + 2.0, FlightMode.MANUAL)
+    sup.request_land()  # e.g. the mission re-sending its landing
+    assert sup.step(obs(t + 2.0, FlightMode.MANUAL)) is None
+    assert sup.ignored_requests == 1 and sup.released
+
+
+def test_land_request_lands_a_vehicle_released_to_a_px4_failsafe():
+    sup, t = following()
+    run(sup, t, t + 2.0, FlightMode.RETURN)
+    sup.request_land()
+    assert sup.step(obs(t + 2.0, FlightMode.RETURN)) is Command.LAND

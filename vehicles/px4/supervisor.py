@@ -1,0 +1,347 @@
+"""Who flies a PX4 vehicle: skyring's engagement state, the set-point watchdog, and respect for a pilot.
+
+MAVSDK re-sends the last offboard set-point at 20 Hz, which would hide a stalled controller from PX4's own
+offboard-loss failsafe; so skyring watches the age of the agent's output itself: older than `hold_after_s`
+-> Hold, older than `land_after_s` -> Land. A vehicle taken out of offboard by a pilot (RC mode switch) or by
+PX4 (a failsafe) is *released*: skyring stops streaming and does not switch back until re-engaged (takeoff);
+while a pilot flies it (a manual mode) skyring's land and hold requests are not sent either.
+
+Pure and clock-free: the asyncio back-end (vehicles/px4.py) reports set-points and telemetry observations,
+and executes the one `Command` that `step` returns. Engagement:
+
+    IDLE -takeoff-> TAKING_OFF -in Hold at height-> ENGAGING -pre-streamed-> FOLLOWING
+    FOLLOWING -stale output-> WATCHDOG_HOLD -fresh output-> ENGAGING ; -stale longer-> LANDING
+    any -land-> LANDING (latched) -on the ground, disarmed-> IDLE
+    FOLLOWING/ENGAGING/holds -mode changed by someone else-> RELEASED -takeoff-> ENGAGING or TAKING_OFF
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+from vehicles.autopilot import FlightMode
+
+
+class Engagement(StrEnum):
+    """skyring's relationship with one vehicle."""
+
+    IDLE = "idle"  # on the ground, or airborne but never engaged by this ground station
+    TAKING_OFF = "taking_off"
+    ENGAGING = "engaging"  # airborne in Hold, pre-streaming set-points before switching to offboard
+    FOLLOWING = "following"  # in offboard, following the agent's set-points
+    WATCHDOG_HOLD = "watchdog_hold"  # the agent's output went stale: skyring put the vehicle in Hold
+    HOLDING = "holding"  # the operator asked for Hold
+    LANDING = "landing"  # landing through PX4 (operator, or the watchdog's longer limit); latched
+    RELEASED = "released"  # a pilot or PX4 took it out of offboard: skyring does not fight
+
+
+class Command(StrEnum):
+    """What the back-end must ask PX4 for."""
+
+    TAKEOFF = "takeoff"  # set the takeoff altitude, arm, take off
+    START_OFFBOARD = "start_offboard"
+    HOLD = "hold"  # stop streaming and switch to Hold
+    LAND = "land"
+
+
+@dataclass(frozen=True)
+class SupervisorParams:
+    """hold_after_s / land_after_s: agent output age (s) that triggers Hold / Land; prestream_s: set-points
+    streamed before switching to offboard (PX4 >= 1.14 wants > 1 s at > 2 Hz); retry_after_s: a command whose
+    effect does not show is sent again after this; mode_grace_s: how long a mode change may take to appear in
+    telemetry (PX4 sends its heartbeat at 1 Hz), during which the old mode is not read as someone else's."""
+
+    hold_after_s: float = 0.5
+    land_after_s: float = 5.0
+    prestream_s: float = 1.2
+    retry_after_s: float = 1.0
+    mode_grace_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.hold_after_s < self.land_after_s and math.isfinite(self.land_after_s)):
+            raise ValueError(
+                f"need 0 < hold_after_s < land_after_s, got {self.hold_after_s} and {self.land_after_s}"
+            )
+        for name in ("prestream_s", "retry_after_s", "mode_grace_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be a non-negative number of seconds, got {value}")
+
+
+@dataclass(frozen=True)
+class Observation:
+    """The vehicle as telemetry shows it at now_s (seconds, the back-end's clock)."""
+
+    now_s: float
+    mode: FlightMode
+    armed: bool
+    in_air: bool
+    link_lost: bool = False
+
+
+# What each command should make the flight mode show.
+_EXPECTED_MODE = {
+    Command.START_OFFBOARD: FlightMode.OFFBOARD,
+    Command.HOLD: FlightMode.HOLD,
+    Command.LAND: FlightMode.LAND,
+    Command.TAKEOFF: FlightMode.TAKEOFF,
+}
+
+
+class OffboardSupervisor:
+    """One vehicle's engagement state machine; requests are recorded at once and acted on at the next step."""
+
+    def __init__(self, params: SupervisorParams = SupervisorParams()) -> None:
+        self.params = params
+        self.engagement = Engagement.IDLE
+        self.released_reason: str | None = None
+        self.takeoff_height_m: float | None = None
+        self.ignored_setpoints = 0
+        self.ignored_requests = 0
+        self.watchdog_holds = 0
+        self.watchdog_landings = 0
+        self._last_setpoint_s: float | None = None
+        self._stream_start_s: float | None = None
+        self._streamed_since_engaged = False
+        self._requests: list[tuple[str, float | None]] = []
+        self._last_command: Command | None = None
+        self._last_command_s = -math.inf
+        self._engaged_from = FlightMode.HOLD  # the mode a (re-)engagement started from: not a takeover
+        self._engaged_at_s = -math.inf  # set-points reach the vehicle from then on (pre-streaming counts)
+
+    # ---- inputs ------------------------------------------------------------------------------------------
+    def request_takeoff(self, height_m: float) -> None:
+        self._requests.append(("takeoff", height_m))
+
+    def request_hold(self) -> None:
+        self._requests.append(("hold", None))
+
+    def request_land(self) -> None:
+        self._requests.append(("land", None))
+
+    def note_setpoint(self, now_s: float) -> bool:
+        """An agent set-point arrived at now_s. False if it is ignored (landing, released, on the ground)."""
+        if self.engagement in (Engagement.IDLE, Engagement.LANDING, Engagement.RELEASED):
+            self.ignored_setpoints += 1
+            return False
+        if self._last_setpoint_s is None or now_s - self._last_setpoint_s > self.params.hold_after_s:
+            self._stream_start_s = now_s  # a new uninterrupted stream starts
+        self._last_setpoint_s = now_s
+        if self.engagement in (Engagement.ENGAGING, Engagement.FOLLOWING):
+            self._streamed_since_engaged = True
+        return True
+
+    def command_failed(self, command: Command) -> None:
+        """The back-end could not get `command` through (denied, timed out); it is retried or given up."""
+        if command is Command.TAKEOFF and self.engagement is Engagement.TAKING_OFF:
+            self.engagement = Engagement.IDLE
+
+    # ---- outputs -----------------------------------------------------------------------------------------
+    @property
+    def forwarding(self) -> bool:
+        """Whether the agent's set-points go to the vehicle now (pre-streaming or following)."""
+        return self.engagement in (Engagement.ENGAGING, Engagement.FOLLOWING)
+
+    @property
+    def released(self) -> bool:
+        return self.engagement is Engagement.RELEASED
+
+    @property
+    def pending(self) -> bool:
+        """Requests recorded but not yet acted on (the next `step` will)."""
+        return bool(self._requests)
+
+    def setpoint_age_s(self, now_s: float) -> float:
+        """Seconds since the last agent set-point (inf before the first)."""
+        return math.inf if self._last_setpoint_s is None else now_s - self._last_setpoint_s
+
+    def step(self, obs: Observation) -> Command | None:
+        """Advance the state machine with one observation; the command to issue now, if any."""
+        command = self._apply_requests(obs)
+        if command is not None:
+            return self._issue(command, obs.now_s)
+        handler = {
+            Engagement.IDLE: self._idle,
+            Engagement.TAKING_OFF: self._taking_off,
+            Engagement.ENGAGING: self._engaging,
+            Engagement.FOLLOWING: self._following,
+            Engagement.WATCHDOG_HOLD: self._watchdog_hold,
+            Engagement.HOLDING: self._holding,
+            Engagement.LANDING: self._landing,
+            Engagement.RELEASED: self._released,
+        }[self.engagement]
+        command = handler(obs)
+        return self._issue(command, obs.now_s) if command is not None else None
+
+    # ---- internals ---------------------------------------------------------------------------------------
+    def _issue(self, command: Command, now_s: float) -> Command:
+        self._last_command, self._last_command_s = command, now_s
+        return command
+
+    def _in_grace(self, now_s: float) -> bool:
+        return now_s - self._last_command_s < self.params.mode_grace_s
+
+    def _retry_time(self, now_s: float) -> bool:
+        return now_s - self._last_command_s >= self.params.retry_after_s + self.params.mode_grace_s
+
+    def _due_retry(self, command: Command, obs: Observation) -> bool:
+        """The mode `command` asks for has not shown after the grace and the retry delay: send it again."""
+        return obs.mode is not _EXPECTED_MODE[command] and not obs.link_lost and self._retry_time(obs.now_s)
+
+    def _apply_requests(self, obs: Observation) -> Command | None:
+        command = None
+        requests, self._requests = self._requests, []
+        for kind, value in requests:
+            if kind in ("land", "hold") and self.released and obs.mode is FlightMode.MANUAL:
+                self.ignored_requests += 1  # a pilot flies it: landing or holding is the pilot's call
+                continue
+            if kind == "land":
+                if self.engagement is Engagement.LANDING:
+                    continue  # already landing: the retry logic handles a lost command
+                if not obs.in_air and not obs.armed:
+                    self.engagement = Engagement.IDLE
+                    continue
+                self.engagement = Engagement.LANDING
+                command = Command.LAND
+            elif kind == "hold":
+                if (
+                    self.engagement
+                    in (
+                        Engagement.ENGAGING,
+                        Engagement.FOLLOWING,
+                        Engagement.WATCHDOG_HOLD,
+                        Engagement.TAKING_OFF,
+                    )
+                    and obs.in_air
+                ):
+                    self.engagement = Engagement.HOLDING
+                    command = Command.HOLD
+            elif kind == "takeoff":
+                if self.engagement in (Engagement.TAKING_OFF, Engagement.FOLLOWING, Engagement.ENGAGING):
+                    continue  # already on its way (the mission re-sends takeoff while telemetry catches up)
+                if self.engagement is Engagement.LANDING and obs.in_air:
+                    continue  # the landing override is latched until the vehicle is down
+                self.takeoff_height_m = value
+                self.released_reason = None
+                if obs.in_air and obs.armed:
+                    self._engage(obs, from_mode=obs.mode)  # re-engage an airborne vehicle
+                    self._streamed_since_engaged = False
+                else:
+                    self.engagement = Engagement.TAKING_OFF
+                    self._streamed_since_engaged = False
+                    command = Command.TAKEOFF
+        return command
+
+    def _foreign_mode(self, obs: Observation, allowed: tuple[FlightMode, ...]) -> bool:
+        """The vehicle is in a mode skyring did not ask for (after the grace for telemetry to catch up)."""
+        return (
+            obs.mode not in allowed
+            and obs.mode is not FlightMode.UNKNOWN
+            and not obs.link_lost
+            and not self._in_grace(obs.now_s)
+        )
+
+    def _engage(self, obs: Observation, *, from_mode: FlightMode = FlightMode.HOLD) -> None:
+        """Start forwarding set-points (pre-streaming); offboard follows after prestream_s of them."""
+        self.engagement = Engagement.ENGAGING
+        self._engaged_from = from_mode
+        self._engaged_at_s = obs.now_s
+
+    def _release(self, obs: Observation) -> None:
+        self.engagement = Engagement.RELEASED
+        self.released_reason = f"left offboard for {obs.mode.value}: skyring released control"
+
+    def _fresh(self, now_s: float) -> bool:
+        return self.setpoint_age_s(now_s) <= self.params.hold_after_s
+
+    def _idle(self, obs: Observation) -> Command | None:
+        return None
+
+    def _taking_off(self, obs: Observation) -> Command | None:
+        if obs.in_air and obs.mode is FlightMode.HOLD and not self._in_grace(obs.now_s):
+            self._engage(obs)  # PX4 finished the takeoff and holds
+            return None
+        if self._foreign_mode(obs, (FlightMode.TAKEOFF, FlightMode.HOLD, FlightMode.READY)):
+            self._release(obs)
+            return None
+        if not obs.in_air and not obs.armed and self._due_retry(Command.TAKEOFF, obs):
+            return Command.TAKEOFF  # the takeoff did not happen (lost command, or disarmed again)
+        return None
+
+    def _engaging(self, obs: Observation) -> Command | None:
+        if obs.mode is FlightMode.OFFBOARD:
+            self.engagement = Engagement.FOLLOWING
+            return None
+        if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD, self._engaged_from)):
+            self._release(obs)
+            return None
+        if self._streamed_since_engaged and self.setpoint_age_s(obs.now_s) > self.params.land_after_s:
+            return self._watchdog_land()
+        if (
+            self._fresh(obs.now_s)
+            and not obs.link_lost
+            and obs.now_s - max(self._stream_start_s, self._engaged_at_s) >= self.params.prestream_s
+            and (self._last_command is not Command.START_OFFBOARD or self._retry_time(obs.now_s))
+        ):
+            return Command.START_OFFBOARD
+        return None
+
+    def _following(self, obs: Observation) -> Command | None:
+        age = self.setpoint_age_s(obs.now_s)
+        if age > self.params.land_after_s:
+            return self._watchdog_land()
+        if age > self.params.hold_after_s:
+            self.engagement = Engagement.WATCHDOG_HOLD
+            self.watchdog_holds += 1
+            return Command.HOLD
+        if self._foreign_mode(obs, (FlightMode.OFFBOARD,)):
+            self._release(obs)
+        return None
+
+    def _watchdog_hold(self, obs: Observation) -> Command | None:
+        if self.setpoint_age_s(obs.now_s) > self.params.land_after_s:
+            return self._watchdog_land()
+        if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD)):
+            self._release(obs)
+            return None
+        if self._fresh(obs.now_s):
+            self._engage(obs)  # the agent is back: pre-stream, then offboard again
+            return None
+        if self._due_retry(Command.HOLD, obs):
+            return Command.HOLD
+        return None
+
+    def _holding(self, obs: Observation) -> Command | None:
+        if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD)):
+            self._release(obs)
+            return None
+        if self._fresh(obs.now_s) and self._last_setpoint_s > self._last_command_s:
+            self._engage(obs)  # set-points after the hold: follow them again
+            return None
+        if self._due_retry(Command.HOLD, obs):
+            return Command.HOLD
+        return None
+
+    def _landing(self, obs: Observation) -> Command | None:
+        if not obs.in_air and not obs.armed:
+            self.engagement = Engagement.IDLE
+            return None
+        if self._foreign_mode(obs, (FlightMode.LAND, FlightMode.HOLD, FlightMode.OFFBOARD, FlightMode.READY)):
+            self._release(obs)  # a pilot took over during the landing
+            return None
+        if obs.in_air and self._due_retry(Command.LAND, obs):
+            return Command.LAND
+        return None
+
+    def _released(self, obs: Observation) -> Command | None:
+        if not obs.in_air and not obs.armed:
+            self.engagement = Engagement.IDLE
+            self.released_reason = None
+        return None
+
+    def _watchdog_land(self) -> Command:
+        self.engagement = Engagement.LANDING
+        self.watchdog_landings += 1
+        return Command.LAND
