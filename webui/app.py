@@ -2,7 +2,9 @@
 
 viser serves its own page and WebSocket on its own port from a daemon thread; `publish` may be called from
 any thread (the ground station calls it from its asyncio loop at about 10 Hz) and applies a whole frame
-atomically.
+atomically. With a `ClientAccess`, each viser client's connection is matched to the operator it was
+forwarded for (the ticket header the ground station's front puts on it), and every control acts on that
+operator's behalf.
 """
 
 from __future__ import annotations
@@ -13,9 +15,13 @@ import threading
 
 import viser
 
+from webui.access import ClientAccess, OpenAccess
 from webui.panels import OperatorPanel
 from webui.scene import SceneRenderer
 from webui.view import OperatorActions, SceneView
+
+TICKET_HEADER = "X-Skyring-Ticket"
+"""The header on a forwarded viser connection that names the signed-in browser behind it."""
 
 
 class OperatorUi:
@@ -23,7 +29,8 @@ class OperatorUi:
 
     host/port: where viser listens (port 0 picks a free port; a busy port makes viser take the next free
     one: read `port` for the real one). sigma: size of the covariance ellipsoid in standard deviations.
-    shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate).
+    shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate). access:
+    who each client is (default: every client is an operator, for a station on loopback without sign-in).
     """
 
     def __init__(
@@ -35,6 +42,7 @@ class OperatorUi:
         port: int = 8080,
         sigma: float = 2.0,
         shadows: bool = False,
+        access: ClientAccess | None = None,
     ) -> None:
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own URL box; callers print ours
             self.server = viser.ViserServer(
@@ -48,9 +56,19 @@ class OperatorUi:
         self.server.initial_camera.up = (0.0, 0.0, 1.0)
         self.server.scene.configure_default_lights(cast_shadow=shadows)
         self._lock = threading.Lock()
+        self.access = access or OpenAccess()
+        self.server.on_client_connect(self._on_connect)
+        self.server.on_client_disconnect(lambda client: self.access.client_disconnected(client.client_id))
         self.scene = SceneRenderer(self.server.scene, sigma=sigma)
-        self.panel = OperatorPanel(self.server, actions, initial)
+        self.panel = OperatorPanel(self.server, actions, initial, access=self.access)
         self.publish(initial)
+
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        # viser keeps each client's websocket connection (with its handshake) by client id
+        connection = self.server._websock_server._live_connections.get(client.client_id)  # noqa: SLF001
+        request = getattr(connection, "request", None)
+        ticket = request.headers.get(TICKET_HEADER) if request is not None else None
+        self.access.client_connected(client.client_id, ticket)
 
     @property
     def port(self) -> int:

@@ -2,8 +2,10 @@
 Land/Release, LAND ALL, start/stop formation, and live plots of the fused covariance trace and tracking error.
 
 Every control calls the same `OperatorActions` the REST API calls; a refusal (ValueError) becomes a
-notification to the client that asked, and the control snaps back to the ground station's value. Landing,
-LAND ALL and release sit behind a per-client confirmation modal. viser runs these callbacks on its own
+notification to the client that asked, and the control snaps back to the ground station's value. Every
+control acts on behalf of the client's signed-in operator (`webui.access`): the ground station refuses (and
+audits) a command from a client that is not signed in as an operator. Landing, LAND ALL and release sit
+behind a per-client confirmation modal, shown only to operators. viser runs these callbacks on its own
 threads, so the actions object must be thread-safe (the ground station's is).
 """
 
@@ -20,6 +22,7 @@ import numpy as np
 import viser
 import viser.uplot
 
+from webui.access import ClientAccess, OpenAccess, acting_as
 from webui.geometry import ground_point
 from webui.view import OperatorActions, SceneView, VehicleView
 
@@ -58,10 +61,17 @@ class OperatorPanel:
     """Builds the GUI once from the first view and refreshes it from every later one (`refresh`)."""
 
     def __init__(
-        self, server: viser.ViserServer, actions: OperatorActions, initial: SceneView, *, plot_every: int = 5
+        self,
+        server: viser.ViserServer,
+        actions: OperatorActions,
+        initial: SceneView,
+        *,
+        plot_every: int = 5,
+        access: ClientAccess | None = None,
     ) -> None:
         self._server = server
         self._actions = actions
+        self._access = access or OpenAccess()
         self._lock = threading.Lock()
         self._pending_clicks: dict[int, float] = {}  # client id -> radius of the obstacle to place
         self._click_registered = False
@@ -215,9 +225,13 @@ class OperatorPanel:
     # ---- operator input ------------------------------------------------------------------------------------
 
     def _run(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> bool:
-        """Run one operator action; tell the client the outcome. Never raises: a GUI callback must not die."""
+        """Run one operator action on behalf of the client's operator; tell the client the outcome. Never
+        raises: a GUI callback must not die."""
+        if client is None:  # not an operator's click (a programmatic update)
+            return False
         try:
-            action()
+            with acting_as(self._access.principal_of(client.client_id).for_command()):
+                action()
         except ValueError as exc:
             _notify(client, "Refused", str(exc), color="red")
             return False
@@ -322,8 +336,13 @@ class OperatorPanel:
         action: Callable[[], object],
         done: str,
     ) -> None:
-        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button."""
+        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button. A client
+        that may not command gets no modal: the command goes straight to the ground station, which refuses
+        and audits it."""
         if client is None:
+            return
+        if not self._access.principal_of(client.client_id).may_command:
+            self._run(client, action, done)
             return
         with client.gui.add_modal(title) as modal:
             client.gui.add_markdown(body)

@@ -55,9 +55,53 @@ def describe_log(flight_log: FlightLog) -> str:
     """One line about a closed flight log: where, what it holds, and any records lost."""
     lost = f"; {flight_log.write_errors} records could not be written" if flight_log.write_errors else ""
     return (
-        f"flight log:     {flight_log.name} ({flight_log.samples} samples, {flight_log.commands} "
-        f"commands{lost}); replay with: skyring replay {flight_log.name}"
+        f"flight log:     {flight_log.name} ({flight_log.samples} samples, {flight_log.audit_records} "
+        f"audit records{lost}); replay with: skyring replay {flight_log.name}"
     )
+
+
+def security_options(
+    *, host: str, users: Path | None, tls_cert: Path | None, tls_key: Path | None
+) -> dict[str, object]:
+    """The gate and TLS files for `serve_station` from --users / SKYRING_USERS(_FILE) and --tls-cert/--tls-key.
+    Listening beyond loopback without users is refused here, before anything flies."""
+    import os
+
+    from server.station.api.gate import LOOPBACK_NAMES, Gate
+    from server.station.api.users import Users, UsersError
+
+    if (tls_cert is None) != (tls_key is None):
+        raise typer.BadParameter("give both --tls-cert and --tls-key, or neither", param_hint="--tls-cert")
+    try:
+        loaded = Users.load(users, os.environ)
+    except UsersError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--users") from None
+    if loaded is None and host not in LOOPBACK_NAMES:
+        raise typer.BadParameter(
+            f"listening on {host} needs sign-in: give --users FILE (make one with `skyring users add FILE "
+            "NAME --role operator`) or set SKYRING_USERS_FILE",
+            param_hint="--host",
+        )
+    return {
+        "gate": Gate(loaded, secure=tls_cert is not None),
+        "ssl_certfile": None if tls_cert is None else str(tls_cert),
+        "ssl_keyfile": None if tls_key is None else str(tls_key),
+    }
+
+
+def start_foxglove(port: int | None, *, host: str, flight_log: FlightLog | None, header: LogHeader, secured: bool):
+    """`--foxglove PORT`: the flight log's channels live over Foxglove's WebSocket protocol on 127.0.0.1
+    (its server has no sign-in, so it never listens beyond loopback). Returns (server, log to publish to)."""
+    if port is None:
+        return None, flight_log
+    import foxglove
+
+    from server.flightlog.log import FlightLog
+
+    published = flight_log if flight_log is not None else FlightLog(header=header, name="foxglove")
+    server = foxglove.start_server(name="skyring", host="127.0.0.1", port=port, context=published.context)
+    typer.echo(f"foxglove:       ws://127.0.0.1:{server.port} (Foxglove WebSocket protocol, loopback only)")
+    return server, published
 
 
 def build_station(*, vehicles: int, seed: int, method: Method, trees: str, person: str, rate_hz: float):
@@ -76,10 +120,17 @@ def build_station(*, vehicles: int, seed: int, method: Method, trees: str, perso
 
 
 def run(
-    station, *, host: str, port: int, viser_port: int, speed: float, flight_log: FlightLog | None = None
+    station,
+    *,
+    host: str,
+    port: int,
+    viser_port: int,
+    speed: float,
+    flight_log: FlightLog | None = None,
+    **serve_options,
 ) -> None:
     """Serve `station` until Ctrl-C / SIGTERM; the MAVs are told to land on the way out. `flight_log`, when
-    given, records the whole run and is closed here."""
+    given, records the whole run and is closed here. serve_options go to `serve_station` (gate, TLS)."""
     from server.station.live import Urls, serve_station
 
     def ready(urls: Urls, _ui: object) -> None:
@@ -87,10 +138,16 @@ def run(
             typer.echo(f"port {port} is busy: the API uses {urls.api} instead")
         if urls.viser_fell_back:
             typer.echo(f"port {viser_port} is busy: the operator page uses {urls.operator} instead")
-        typer.echo(f"operator view:  {urls.operator}")
+        typer.echo(f"operator view:  {urls.api}  (3-D page alone: {urls.operator})")
         typer.echo(
-            f"API and docs:   {urls.api}  ({urls.api}docs, state at {urls.api}api/state, stream at "
+            f"API and docs:   {urls.api}docs  (state at {urls.api}api/state, stream at "
             f"{urls.api.replace('http', 'ws', 1)}ws)"
+        )
+        gate = serve_options.get("gate")
+        typer.echo(
+            "sign-in:        required (users file)"
+            if gate is not None and not gate.open
+            else "sign-in:        off (loopback only: anyone on this machine is the operator)"
         )
         typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
@@ -99,7 +156,15 @@ def run(
         station.attach_log(flight_log)
     try:
         stats = asyncio.run(
-            serve_station(station, host=host, port=port, viser_port=viser_port, speed=speed, on_ready=ready)
+            serve_station(
+                station,
+                host=host,
+                port=port,
+                viser_port=viser_port,
+                speed=speed,
+                on_ready=ready,
+                **serve_options,
+            )
         )
     finally:
         if flight_log is not None:
@@ -117,7 +182,7 @@ def serve(
     host: Annotated[str, typer.Option(help="address to listen on (0.0.0.0: every interface)")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="API port; a free one is used if it is busy")] = 8000,
     viser_port: Annotated[
-        int, typer.Option(help="operator page (viser) port; the next free one if busy")
+        int, typer.Option(help="viser's internal port on 127.0.0.1 (the page is served through --port)")
     ] = 8080,
     vehicles: Annotated[int, typer.Option(help="number of simulated MAVs")] = 3,
     seed: Annotated[int, typer.Option(help="seed of the simulated world")] = 0,
@@ -144,11 +209,25 @@ def serve(
         Path | None,
         typer.Option(
             "--log",
-            help="flight log to write (JSON Lines) [default: runs/flight-<UTC time>.jsonl]",
+            help="flight log to write (MCAP) [default: runs/flight-<UTC time>.mcap]",
             dir_okay=False,
         ),
     ] = None,
     no_log: Annotated[bool, typer.Option("--no-log", help="do not write a flight log")] = False,
+    users: Annotated[
+        Path | None,
+        typer.Option(
+            help="users file (`skyring users add`): sign-in required; needed beyond loopback "
+            "[env: SKYRING_USERS_FILE, or SKYRING_USERS with the lines]",
+            dir_okay=False,
+        ),
+    ] = None,
+    tls_cert: Annotated[Path | None, typer.Option(help="serve HTTPS: certificate chain (PEM)")] = None,
+    tls_key: Annotated[Path | None, typer.Option(help="serve HTTPS: private key (PEM)")] = None,
+    foxglove: Annotated[
+        int | None,
+        typer.Option(help="also serve the log's channels live to Foxglove on 127.0.0.1:PORT (0: a free port)"),
+    ] = None,
 ) -> None:
     """Run the ground station over the embedded simulation: 3-D operator view, REST API and state stream."""
     if not 1 <= vehicles <= 16:
@@ -163,6 +242,9 @@ def serve(
         if not 0 <= value <= 65535:
             raise typer.BadParameter(f"must be a TCP port (0-65535), got {value}", param_hint=name)
     log_path = log_path_option(log_path=log, no_log=no_log)
+    secure = security_options(host=host, users=users, tls_cert=tls_cert, tls_key=tls_key)
+    if foxglove is not None and not 0 <= foxglove <= 65535:
+        raise typer.BadParameter(f"must be a TCP port (0-65535), got {foxglove}", param_hint="--foxglove")
     if px4 or px4_sitl:
         run_px4(
             px4=px4 or [],
@@ -178,6 +260,8 @@ def serve(
             viser_port=viser_port,
             speed=speed,
             log_path=log_path,
+            foxglove_port=foxglove,
+            **secure,
         )
         return
     from vehicles.sim.scenario import PERSON_MODES
@@ -191,26 +275,23 @@ def serve(
         raise typer.BadParameter(
             f"must be one of {', '.join(PERSON_MODES)}, got {person!r}", param_hint="--person"
         )
-    flight_log = None
-    if log_path is not None:
-        from server.flightlog.log import DEFAULT_SAMPLE_RATE_HZ, utc_now_iso
-        from server.flightlog.records import LogHeader
+    from server.flightlog.log import DEFAULT_SAMPLE_RATE_HZ, utc_now_iso
+    from server.flightlog.records import LogHeader
 
-        flight_log = open_log(
-            log_path,
-            header=LogHeader(
-                command="serve",
-                vehicles=vehicles,
-                seed=seed,
-                method=method.value,
-                trees=trees,
-                person=person,
-                rate_hz=rate,
-                speed=speed,
-                sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
-                started_utc=utc_now_iso(),
-            ),
-        )
+    header = LogHeader(
+        command="serve",
+        vehicles=vehicles,
+        seed=seed,
+        method=method.value,
+        trees=trees,
+        person=person,
+        rate_hz=rate,
+        speed=speed,
+        sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
+        started_utc=utc_now_iso(),
+    )
+    flight_log = None if log_path is None else open_log(log_path, header=header)
+    fox, flight_log = start_foxglove(foxglove, host=host, flight_log=flight_log, header=header, secured=False)
     try:
         station = build_station(
             vehicles=vehicles, seed=seed, method=method, trees=trees, person=person, rate_hz=rate
@@ -220,7 +301,11 @@ def serve(
             flight_log.close()
         raise
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    run(station, host=host, port=port, viser_port=viser_port, speed=speed, flight_log=flight_log)
+    try:
+        run(station, host=host, port=port, viser_port=viser_port, speed=speed, flight_log=flight_log, **secure)
+    finally:
+        if fox is not None:
+            fox.stop()
 
 
 def run_px4(
@@ -238,6 +323,8 @@ def run_px4(
     viser_port: int,
     speed: float,
     log_path: Path | None = None,
+    foxglove_port: int | None = None,
+    **serve_options,
 ) -> None:
     """`skyring serve --px4 URL ... | --px4-sitl N [--origin lat,lon,alt]`: validate, connect, serve until
     Ctrl-C / SIGTERM, land every MAV on the way out. `--px4` may be repeated or hold comma-separated URLs.
@@ -263,31 +350,26 @@ def run_px4(
 
     def ready(urls_: Urls, _ui: object) -> None:
         typer.echo(f"PX4 vehicles:   {', '.join(urls)}")
-        typer.echo(f"operator view:  {urls_.operator}")
-        typer.echo(f"API and docs:   {urls_.api}  ({urls_.api}docs)")
+        typer.echo(f"operator view:  {urls_.api}  (3-D page alone: {urls_.operator})")
+        typer.echo(f"API and docs:   {urls_.api}docs")
         typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
-    flight_log = (
-        None
-        if log_path is None
-        else open_log(
-            log_path,
-            header=LogHeader(
-                command="serve --px4",
-                vehicles=len(urls),
-                seed=seed,
-                method=Method(method).value,
-                trees=trees,
-                person=person,
-                rate_hz=rate_hz,
-                speed=1.0,
-                sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
-                started_utc=utc_now_iso(),
-                vehicle_urls=tuple(urls),
-            ),
-        )
+    header = LogHeader(
+        command="serve --px4",
+        vehicles=len(urls),
+        seed=seed,
+        method=Method(method).value,
+        trees=trees,
+        person=person,
+        rate_hz=rate_hz,
+        speed=1.0,
+        sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
+        started_utc=utc_now_iso(),
+        vehicle_urls=tuple(urls),
     )
+    flight_log = None if log_path is None else open_log(log_path, header=header)
+    fox, flight_log = start_foxglove(foxglove_port, host=host, flight_log=flight_log, header=header, secured=False)
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
     try:
         stats = asyncio.run(
@@ -304,6 +386,7 @@ def run_px4(
                 viser_port=viser_port,
                 on_ready=ready,
                 flight_log=flight_log,
+                **serve_options,
             )
         )
     except Px4Error as exc:
@@ -312,6 +395,8 @@ def run_px4(
     finally:
         if flight_log is not None:
             flight_log.close()
+        if fox is not None:
+            fox.stop()
     typer.echo(f"stopped after {stats.ticks} control ticks")
     if flight_log is not None:
         typer.echo(describe_log(flight_log))
