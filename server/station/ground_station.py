@@ -171,7 +171,7 @@ class GroundStation:
             self._changed()
             self._mission.step(now)
             if self._log is not None and self._log.sample_due(now):
-                self._log.record_sample(self._sample)
+                self._log.record_sample(self.scene_view)
 
     # ---- flight log ---------------------------------------------------------------------------------------
     def attach_log(self, flight_log: FlightLog) -> None:
