@@ -11,7 +11,8 @@ audited like an accepted one.
 from __future__ import annotations
 
 import swagger_ui_bundle
-from fastapi import FastAPI, HTTPException, Request
+from fastapi import FastAPI, Request
+from starlette.exceptions import HTTPException
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
@@ -47,8 +48,15 @@ def _install_error_handlers(app: FastAPI) -> None:
         return _problem(422, str(exc))
 
     @app.exception_handler(HTTPException)
-    async def _http(_: Request, exc: HTTPException) -> JSONResponse:
-        return _problem(exc.status_code, str(exc.detail), headers=exc.headers)
+    async def _http(request: Request, exc: HTTPException) -> JSONResponse:
+        headers = exc.headers
+        if exc.status_code == 405:  # list every method of the path, not only those of the route matched first
+            methods = sorted(
+                {m for r in app.routes if getattr(r, "path", None) and r.matches(request.scope)[0].value
+                 for m in (getattr(r, "methods", None) or ())}
+            )
+            headers = {"Allow": ", ".join(methods)}
+        return _problem(exc.status_code, str(exc.detail), headers=headers)
 
     @app.exception_handler(RequestValidationError)
     async def _malformed(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -76,6 +76,7 @@ def problem(description: str) -> dict:
 
 
 COMMON_REFUSALS = {
+    400: problem("the body is not JSON, or a bad Content-Length or Host"),
     401: problem("not signed in (the station requires sign-in)"),
     403: problem("signed in as an observer, or sent from a page of another origin"),
     413: problem("request body larger than 64 KiB"),

@@ -5,7 +5,7 @@ failed ones too, are audited (never with the secret)."""
 from __future__ import annotations
 
 from fastapi import APIRouter, HTTPException, Request
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 
 from server.station.api.deps import caller, gate_of, remote_of, station_of
 from server.station.api.gate import SESSION_COOKIE, bearer_or_cookie
@@ -19,6 +19,7 @@ router = APIRouter(prefix="/auth", tags=["sign-in"])
     "/login",
     response_model=SignedIn,
     responses={
+        400: COMMON_REFUSALS[400],
         401: problem("wrong name or secret"),
         403: COMMON_REFUSALS[403],
         404: problem("this station runs without sign-in (loopback only)"),
@@ -63,9 +64,9 @@ def login(body: SignInRequest, request: Request) -> JSONResponse:
 
 
 @router.post("/logout", status_code=204, responses={403: COMMON_REFUSALS[403]})
-def logout(request: Request) -> JSONResponse:
+def logout(request: Request) -> Response:
     gate_of(request).sign_out(bearer_or_cookie(request.headers, request.cookies))
-    response = JSONResponse(None, status_code=204)
+    response = Response(status_code=204)
     response.delete_cookie(SESSION_COOKIE, path="/", httponly=True, samesite="strict", secure=gate_of(request).secure)
     return response
 
