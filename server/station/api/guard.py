@@ -28,9 +28,10 @@ CSP_DEFAULT = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "
     "frame-src 'self'; frame-ancestors 'self'; base-uri 'none'; form-action 'self'"
 )
-# the viser client is one HTML file with inline scripts and styles, web workers and WebAssembly
+# the viser client is one HTML file with inline scripts and styles, web workers, WebAssembly and a library
+# that evaluates strings: the page is the station's own, and connect-src/frame-ancestors still bind it
 CSP_OPERATOR = (
-    "default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:; "
+    "default-src 'self'; script-src 'self' 'unsafe-inline' 'unsafe-eval' 'wasm-unsafe-eval' blob:; "
     "style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; font-src 'self' data:; "
     "connect-src 'self' data: blob:; worker-src 'self' blob:; frame-ancestors 'self'; base-uri 'none'; "
     "form-action 'self'"
