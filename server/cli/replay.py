@@ -22,7 +22,6 @@ import typer
 
 from server.flightlog.reader import FlightLogError, FlightRecord, read_flight_log
 from server.flightlog.records import AuditRecord
-
 from webui.view import SceneView
 
 if TYPE_CHECKING:
@@ -197,9 +196,7 @@ def serve_replay(
     on_ready(url, ui) runs once the page listens. Returns the samples published."""
     from webui.app import OperatorUi  # viser loads only for a playback
 
-    ui = OperatorUi(
-        actions=ReplayActions(record.path), initial=record.samples[0], host=host, port=viser_port
-    )
+    ui = OperatorUi(actions=ReplayActions(record.path), initial=record.samples[0], host=host, port=viser_port)
     try:
         if on_ready is not None:
             on_ready(f"http://{host}:{ui.port}/", ui)

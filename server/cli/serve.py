@@ -89,7 +89,9 @@ def security_options(
     }
 
 
-def start_foxglove(port: int | None, *, host: str, flight_log: FlightLog | None, header: LogHeader, secured: bool):
+def start_foxglove(
+    port: int | None, *, host: str, flight_log: FlightLog | None, header: LogHeader, secured: bool
+):
     """`--foxglove PORT`: the flight log's channels live over Foxglove's WebSocket protocol on 127.0.0.1
     (its server has no sign-in, so it never listens beyond loopback). Returns (server, log to publish to)."""
     if port is None:
@@ -226,7 +228,9 @@ def serve(
     tls_key: Annotated[Path | None, typer.Option(help="serve HTTPS: private key (PEM)")] = None,
     foxglove: Annotated[
         int | None,
-        typer.Option(help="also serve the log's channels live to Foxglove on 127.0.0.1:PORT (0: a free port)"),
+        typer.Option(
+            help="also serve the log's channels live to Foxglove on 127.0.0.1:PORT (0: a free port)"
+        ),
     ] = None,
 ) -> None:
     """Run the ground station over the embedded simulation: 3-D operator view, REST API and state stream."""
@@ -302,7 +306,9 @@ def serve(
         raise
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
-        run(station, host=host, port=port, viser_port=viser_port, speed=speed, flight_log=flight_log, **secure)
+        run(
+            station, host=host, port=port, viser_port=viser_port, speed=speed, flight_log=flight_log, **secure
+        )
     finally:
         if fox is not None:
             fox.stop()
@@ -369,7 +375,9 @@ def run_px4(
         vehicle_urls=tuple(urls),
     )
     flight_log = None if log_path is None else open_log(log_path, header=header)
-    fox, flight_log = start_foxglove(foxglove_port, host=host, flight_log=flight_log, header=header, secured=False)
+    fox, flight_log = start_foxglove(
+        foxglove_port, host=host, flight_log=flight_log, header=header, secured=False
+    )
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
     try:
         stats = asyncio.run(

@@ -78,8 +78,12 @@ def _frustum(vehicle: VehicleView, view: SceneView, scale_m: float = 2.0) -> Lin
     # camera frame: x forward, y left, z up; the image corners at distance scale_m along x
     corners = np.array([[scale_m, s * half_h, t * half_v] for s, t in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
     pitch, yaw = cam.pitch_down_rad, float(vehicle.yaw_rad) if math.isfinite(vehicle.yaw_rad) else 0.0
-    down = np.array([[math.cos(pitch), 0.0, math.sin(pitch)], [0.0, 1.0, 0.0], [-math.sin(pitch), 0.0, math.cos(pitch)]])
-    turn = np.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    down = np.array(
+        [[math.cos(pitch), 0.0, math.sin(pitch)], [0.0, 1.0, 0.0], [-math.sin(pitch), 0.0, math.cos(pitch)]]
+    )
+    turn = np.array(
+        [[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]]
+    )
     apex = np.asarray(vehicle.position_m) + turn @ np.array([cam.forward_offset_m, 0.0, 0.0])
     world = apex + (turn @ down @ corners.T).T
     pairs = [apex, world[0], apex, world[1], apex, world[2], apex, world[3]]
@@ -102,7 +106,11 @@ def _vehicle(vehicle: VehicleView, view: SceneView, stamp: Timestamp) -> list[Sc
     body = _entity(
         f"mav/{vehicle.vehicle_id}",
         stamp,
-        cubes=[CubePrimitive(pose=_pose(vehicle.position_m, wxyz), size=Vector3(x=0.8, y=0.8, z=0.2), color=color)],
+        cubes=[
+            CubePrimitive(
+                pose=_pose(vehicle.position_m, wxyz), size=Vector3(x=0.8, y=0.8, z=0.2), color=color
+            )
+        ],
         lines=[_frustum(vehicle, view)],
         texts=[
             TextPrimitive(

@@ -18,7 +18,16 @@ from mcap.stream_reader import StreamReader
 from pydantic import ValidationError
 
 from server.flightlog.channels import AUDIT_TOPIC, END_TOPIC, HEADER_TOPIC, STATE_TOPIC
-from server.flightlog.records import AUDIT, END, HEADER, AuditRecord, LogEnd, LogHeader, RecordError, check_format
+from server.flightlog.records import (
+    AUDIT,
+    END,
+    HEADER,
+    AuditRecord,
+    LogEnd,
+    LogHeader,
+    RecordError,
+    check_format,
+)
 from webui.schema import scene_from_json
 from webui.view import SceneView
 

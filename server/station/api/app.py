@@ -12,13 +12,20 @@ from __future__ import annotations
 
 import swagger_ui_bundle
 from fastapi import FastAPI, Request
-from starlette.exceptions import HTTPException
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException
 from starlette.types import Scope
 
-from server.station.api import operator_page, routes_auth, routes_commands, routes_pages, routes_state, routes_stream
+from server.station.api import (
+    operator_page,
+    routes_auth,
+    routes_commands,
+    routes_pages,
+    routes_state,
+    routes_stream,
+)
 from server.station.api.deps import caller
 from server.station.api.gate import Gate, bearer_or_cookie
 from server.station.api.guard import MAX_BODY_BYTES, MUTATING, Guard
@@ -28,7 +35,9 @@ from server.station.ground_station import GroundStation, NotAuthorisedError
 from webui.access import Surface
 
 
-def _problem(status: int, detail: str, errors: list[FieldProblem] | None = None, headers=None) -> JSONResponse:
+def _problem(
+    status: int, detail: str, errors: list[FieldProblem] | None = None, headers=None
+) -> JSONResponse:
     return JSONResponse(
         Problem(detail=detail, errors=errors or []).model_dump(), status_code=status, headers=headers
     )
@@ -52,8 +61,12 @@ def _install_error_handlers(app: FastAPI) -> None:
         headers = exc.headers
         if exc.status_code == 405:  # list every method of the path, not only those of the route matched first
             methods = sorted(
-                {m for r in app.routes if getattr(r, "path", None) and r.matches(request.scope)[0].value
-                 for m in (getattr(r, "methods", None) or ())}
+                {
+                    m
+                    for r in app.routes
+                    if getattr(r, "path", None) and r.matches(request.scope)[0].value
+                    for m in (getattr(r, "methods", None) or ())
+                }
             )
             headers = {"Allow": ", ".join(methods)}
         return _problem(exc.status_code, str(exc.detail), headers=headers)
@@ -61,7 +74,9 @@ def _install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def _malformed(request: Request, exc: RequestValidationError) -> JSONResponse:
         errors = [
-            FieldProblem(loc=[p if isinstance(p, int) else str(p) for p in e["loc"]], msg=e["msg"], type=e["type"])
+            FieldProblem(
+                loc=[p if isinstance(p, int) else str(p) for p in e["loc"]], msg=e["msg"], type=e["type"]
+            )
             for e in exc.errors()
         ]
         detail = "malformed request: " + "; ".join(f"{'.'.join(map(str, e.loc))}: {e.msg}" for e in errors)

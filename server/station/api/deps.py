@@ -66,7 +66,13 @@ Viewer = Annotated[Principal, Depends(viewer)]
 Commander = Annotated[Principal, Depends(commander)]
 
 
-def json_response(adapter: TypeAdapter, value: object, *, status_code: int = 200, principal: Principal | None = None) -> Response:
+def json_response(
+    adapter: TypeAdapter, value: object, *, status_code: int = 200, principal: Principal | None = None
+) -> Response:
     """`value` as JSON through its TypeAdapter (the view types' own schema), with the command id if any."""
-    headers = {"X-Command-Id": principal.command_id} if principal is not None and principal.command_id else None
-    return Response(adapter.dump_json(value), status_code=status_code, media_type="application/json", headers=headers)
+    headers = (
+        {"X-Command-Id": principal.command_id} if principal is not None and principal.command_id else None
+    )
+    return Response(
+        adapter.dump_json(value), status_code=status_code, media_type="application/json", headers=headers
+    )

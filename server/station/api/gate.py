@@ -134,7 +134,9 @@ class Gate:
         name = urlsplit(f"//{host}").hostname or ""
         if name in LOOPBACK_NAMES or f"[{name}]" in LOOPBACK_NAMES:
             return None
-        return f"host {host!r} is not this machine: without sign-in the station answers only on loopback names"
+        return (
+            f"host {host!r} is not this machine: without sign-in the station answers only on loopback names"
+        )
 
 
 def bearer_or_cookie(headers: Mapping[str, str], cookies: Mapping[str, str]) -> str | None:

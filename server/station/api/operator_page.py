@@ -89,7 +89,9 @@ async def operator_socket(websocket: WebSocket) -> None:
     client = websocket.client
     remote = f"{client.host}:{client.port}" if client is not None else ""
     token = bearer_or_cookie(websocket.headers, websocket.cookies)
-    foreign = gate.foreign_origin(websocket.headers, scheme="https" if websocket.url.scheme == "wss" else "http")
+    foreign = gate.foreign_origin(
+        websocket.headers, scheme="https" if websocket.url.scheme == "wss" else "http"
+    )
     if foreign is not None or gate.principal(token, surface=Surface.PAGE, remote=remote).role is None:
         await websocket.close(code=1008)
         return

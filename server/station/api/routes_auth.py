@@ -43,7 +43,9 @@ def login(body: SignInRequest, request: Request) -> JSONResponse:
         raise HTTPException(401, "wrong name or secret")
     token, user = opened
     station_of(request).audit(
-        Principal(name=user.name, role=user.role, surface=Surface.API, remote=who.remote, command_id=who.command_id),
+        Principal(
+            name=user.name, role=user.role, surface=Surface.API, remote=who.remote, command_id=who.command_id
+        ),
         "sign_in",
         {},
         accepted=True,
@@ -67,7 +69,9 @@ def login(body: SignInRequest, request: Request) -> JSONResponse:
 def logout(request: Request) -> Response:
     gate_of(request).sign_out(bearer_or_cookie(request.headers, request.cookies))
     response = Response(status_code=204)
-    response.delete_cookie(SESSION_COOKIE, path="/", httponly=True, samesite="strict", secure=gate_of(request).secure)
+    response.delete_cookie(
+        SESSION_COOKIE, path="/", httponly=True, samesite="strict", secure=gate_of(request).secure
+    )
     return response
 
 

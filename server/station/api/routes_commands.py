@@ -9,13 +9,12 @@ from typing import Annotated
 
 from fastapi import APIRouter, Path, Request
 from fastapi.responses import Response
+from pydantic import TypeAdapter
 
 from server.station.api.deps import Commander, json_response, station_of
 from server.station.api.models import COMMON_REFUSALS, FormationRequest, LandAll, ObstacleRequest, problem
 from server.station.api.routes_state import FORMATION
 from webui.access import acting_as
-from pydantic import TypeAdapter
-
 from webui.schema import VEHICLE
 from webui.view import FormationState, ObstacleView, VehicleView
 
@@ -52,7 +51,9 @@ def start_formation(request: Request, principal: Commander) -> Response:
 
 
 @router.post(
-    "/formation/stop", response_model=FormationState, summary="Stop formation control: every MAV holds position"
+    "/formation/stop",
+    response_model=FormationState,
+    summary="Stop formation control: every MAV holds position",
 )
 def stop_formation(request: Request, principal: Commander) -> Response:
     with acting_as(principal):

@@ -57,7 +57,11 @@ def index(request: Request) -> Response:
     gate = gate_of(request)
     if principal.role is None:
         return RedirectResponse("/login?next=/", status_code=303)
-    who = "local operator (no sign-in on loopback)" if gate.open else f"{principal.name} ({principal.role.value})"
+    who = (
+        "local operator (no sign-in on loopback)"
+        if gate.open
+        else f"{principal.name} ({principal.role.value})"
+    )
     return HTMLResponse(landing_page(operator_url="/operator/", who=who, sign_out=not gate.open))
 
 

@@ -111,7 +111,10 @@ class StateFeed:
         return self._seq, self._frame
 
 
-def _run_command(station: GroundStation, command: SetFormation | AddObstacle | RemoveObstacle | VehicleCommand | TeamCommand) -> object:
+def _run_command(
+    station: GroundStation,
+    command: SetFormation | AddObstacle | RemoveObstacle | VehicleCommand | TeamCommand,
+) -> object:
     if isinstance(command, SetFormation):
         return station.set_formation(d_des_m=command.d_des_m, h_des_m=command.h_des_m)
     if isinstance(command, AddObstacle):
@@ -139,7 +142,9 @@ def handle_command(station: GroundStation, principal: Principal, text: str) -> d
         detail = "malformed command: " + "; ".join(
             f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()
         )
-        name = raw.get("command") if isinstance(raw, dict) and isinstance(raw.get("command"), str) else "unknown"
+        name = (
+            raw.get("command") if isinstance(raw, dict) and isinstance(raw.get("command"), str) else "unknown"
+        )
         station.audit(principal, str(name)[:64], {}, accepted=False, message=detail)
         return {"reply_to": reply_to, "accepted": False, "detail": detail, "result": None}
     try:
@@ -158,7 +163,9 @@ async def stream(websocket: WebSocket) -> None:
     feed: StateFeed = app.state.feed
     client = websocket.client
     remote = f"{client.host}:{client.port}" if client is not None else ""
-    foreign = gate.foreign_origin(websocket.headers, scheme="https" if websocket.url.scheme == "wss" else "http")
+    foreign = gate.foreign_origin(
+        websocket.headers, scheme="https" if websocket.url.scheme == "wss" else "http"
+    )
     token = bearer_or_cookie(websocket.headers, websocket.cookies)
     principal = gate.principal(token, surface=Surface.WS, remote=remote)
     if foreign is not None or principal.role is None:
@@ -170,7 +177,9 @@ async def stream(websocket: WebSocket) -> None:
     async def read() -> None:
         while True:
             text = await websocket.receive_text()
-            current = gate.principal(token, surface=Surface.WS, remote=remote)  # a sign-out takes effect at once
+            current = gate.principal(
+                token, surface=Surface.WS, remote=remote
+            )  # a sign-out takes effect at once
             reply = await asyncio.to_thread(handle_command, station, current, text)
             replies.put_nowait(reply)  # QueueFull: a client that sends without reading is dropped
 
@@ -180,11 +189,15 @@ async def stream(websocket: WebSocket) -> None:
             while True:
                 frame_task = asyncio.ensure_future(feed.next_frame(seen))
                 reply_task = asyncio.ensure_future(replies.get())
-                done, pending = await asyncio.wait({frame_task, reply_task}, return_when=asyncio.FIRST_COMPLETED)
+                done, pending = await asyncio.wait(
+                    {frame_task, reply_task}, return_when=asyncio.FIRST_COMPLETED
+                )
                 for task in pending:
                     task.cancel()
                 if reply_task in done:
-                    await asyncio.wait_for(websocket.send_text(json.dumps(reply_task.result())), SEND_TIMEOUT_S)
+                    await asyncio.wait_for(
+                        websocket.send_text(json.dumps(reply_task.result())), SEND_TIMEOUT_S
+                    )
                 if frame_task in done:
                     seen, frame = frame_task.result()
                     await asyncio.wait_for(websocket.send_text(frame.decode()), SEND_TIMEOUT_S)

@@ -113,16 +113,22 @@ class Users:
                 continue
             parts = line.split()
             if len(parts) != 3:
-                raise UsersError(f"{source}, entry {number}: expected `name role hash`, got {len(parts)} fields")
+                raise UsersError(
+                    f"{source}, entry {number}: expected `name role hash`, got {len(parts)} fields"
+                )
             name, role, stored = parts
             if not NAME.match(name):
                 raise UsersError(f"{source}, entry {number}: bad user name {name!r}")
             try:
                 role_ = Role(role)
             except ValueError:
-                raise UsersError(f"{source}, entry {number}: role must be operator or observer, got {role!r}") from None
+                raise UsersError(
+                    f"{source}, entry {number}: role must be operator or observer, got {role!r}"
+                ) from None
             if not stored.startswith("scrypt$") or stored.count("$") != 5:
-                raise UsersError(f"{source}, entry {number}: the secret must be an scrypt hash, not plain text")
+                raise UsersError(
+                    f"{source}, entry {number}: the secret must be an scrypt hash, not plain text"
+                )
             users.append(User(name=name, role=role_, secret_hash=stored))
         return cls(users)
 

@@ -436,8 +436,12 @@ async def test_websocket_streams_the_state_at_least_10_times_a_second_and_takes_
             for _ in range(10):
                 await ws.recv()
             elapsed = time.monotonic() - start
-            await ws.send(json.dumps({"id": "c1", "command": "set_formation", "d_des_m": 9.0, "h_des_m": 8.0}))
-            await ws.send(json.dumps({"id": "c2", "command": "set_formation", "d_des_m": 99.0, "h_des_m": 8.0}))
+            await ws.send(
+                json.dumps({"id": "c1", "command": "set_formation", "d_des_m": 9.0, "h_des_m": 8.0})
+            )
+            await ws.send(
+                json.dumps({"id": "c2", "command": "set_formation", "d_des_m": 99.0, "h_des_m": 8.0})
+            )
             replies = {}
             while len(replies) < 2:
                 message = json.loads(await ws.recv())

@@ -42,7 +42,9 @@ def test_a_20_mb_body_gets_413_and_the_process_grows_by_less_than_50_mb():
         assert httpx.get(f"{api}api/state", timeout=10).status_code == 200
         before = rss_bytes(proc.pid)
         body = b"{" + b" " * (BODY_BYTES - 2) + b"}"
-        declared = httpx.post(f"{api}api/obstacles", content=body, headers={"content-type": "application/json"}, timeout=30)
+        declared = httpx.post(
+            f"{api}api/obstacles", content=body, headers={"content-type": "application/json"}, timeout=30
+        )
 
         def chunks():
             for i in range(0, BODY_BYTES, 1 << 20):

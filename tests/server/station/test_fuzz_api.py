@@ -5,8 +5,8 @@ response matches the schema (status, headers, body), and a refused request chang
 from __future__ import annotations
 
 import schemathesis
-from schemathesis.specs.openapi.checks import positive_data_acceptance
 from hypothesis import HealthCheck, settings
+from schemathesis.specs.openapi.checks import positive_data_acceptance
 
 from server.station.api import create_app
 from server.station.ground_station import GroundStation
@@ -43,4 +43,6 @@ def test_every_operation_conforms_and_refusals_change_nothing(case):
     case.validate_response(response, excluded_checks=[positive_data_acceptance])
     assert response.status_code < 500
     if response.status_code >= 400:
-        assert digest() == before, f"{case.method} {case.path} was refused ({response.status_code}) but changed state"
+        assert digest() == before, (
+            f"{case.method} {case.path} was refused ({response.status_code}) but changed state"
+        )

@@ -310,7 +310,9 @@ async def test_tls_serves_https_with_a_secure_cookie_and_hsts(station, users, tm
     app = create_app(station, viser_port=1, gate=Gate(users, secure=True))
     server, task, port = await _serve(app, ssl_certfile=str(cert), ssl_keyfile=str(key))
     try:
-        async with httpx.AsyncClient(base_url=f"https://127.0.0.1:{port}", verify=ssl.create_default_context(cafile=str(cert))) as c:
+        async with httpx.AsyncClient(
+            base_url=f"https://127.0.0.1:{port}", verify=ssl.create_default_context(cafile=str(cert))
+        ) as c:
             response = await c.post("/auth/login", json={"name": OPERATOR[0], "secret": OPERATOR[1]})
             assert response.status_code == 200
             assert "Secure" in response.headers["set-cookie"]
