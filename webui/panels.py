@@ -336,9 +336,9 @@ class OperatorPanel:
         action: Callable[[], object],
         done: str,
     ) -> None:
-        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button. A client
-        that may not command gets no modal: the command goes straight to the ground station, which refuses
-        and audits it."""
+        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button. A
+        client that may not command gets no modal: the command goes straight to the ground station, which
+        refuses and audits it."""
         if client is None:
             return
         if not self._access.principal_of(client.client_id).may_command:

@@ -26,8 +26,9 @@ from webui.arrays import Age, Cov6, Points3, Real, Vec2, Vec3
 class VehicleView:
     """One MAV as the operator sees it.
 
-    position_m (3,), velocity_mps (3,) and yaw_rad (ENU) as reported by its autopilot; plan_positions_m (M, 3) its latest
-    horizon plan (M = 0 when none); phase: the mission's phase name (e.g. "formation", "landing", "landed");
+    position_m (3,), velocity_mps (3,) and yaw_rad (ENU) as reported by its autopilot;
+    plan_positions_m (M, 3) its latest horizon plan (M = 0 when none); phase: the mission's phase name
+    (e.g. "formation", "landing", "landed");
     mode: the autopilot flight mode name; link_age_s: seconds since its last telemetry (stale when
     `link_stale`); solver_time_s: OSQP's time of the last solve (None before the first); battery_fraction in
     [0, 1] or None when unknown.

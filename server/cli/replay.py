@@ -122,7 +122,8 @@ def command_line(record: AuditRecord) -> str:
     who = f"{record.operator or '(not signed in)'} [{record.role or '-'}] via {record.surface}"
     where = f" from {record.remote}" if record.remote else ""
     outcome = "accepted" if record.accepted else f"REFUSED: {record.message}"
-    return f"{record.time_s:8.1f} s  {record.utc}  {record.command_id:<12} {who}{where}  {record.command}({args}): {outcome}"
+    head = f"{record.time_s:8.1f} s  {record.utc}  {record.command_id:<12} {who}{where}"
+    return f"{head}  {record.command}({args}): {outcome}"
 
 
 def audit_table(record: FlightRecord) -> str:

@@ -63,7 +63,7 @@ def describe_log(flight_log: FlightLog) -> str:
 def security_options(
     *, host: str, users: Path | None, tls_cert: Path | None, tls_key: Path | None
 ) -> dict[str, object]:
-    """The gate and TLS files for `serve_station` from --users / SKYRING_USERS(_FILE) and --tls-cert/--tls-key.
+    """The gate and TLS files for `serve_station` from --users / SKYRING_USERS(_FILE) and --tls-*.
     Listening beyond loopback without users is refused here, before anything flies."""
     import os
 

@@ -1,5 +1,5 @@
-"""`skyring users FILE NAME --role ROLE`: add an operator to a users file (the secret is asked for, hashed with
-scrypt and never stored or printed). `skyring users add FILE NAME` reads the same way."""
+"""`skyring users add FILE NAME --role ROLE`: add an operator to a users file (the secret is asked for,
+hashed with scrypt and never stored or printed)."""
 
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ client alike (both are sinks of one `foxglove.Context`).
 |---|---|---|
 | `/scene` | `foxglove.SceneUpdate` (protobuf) | the operator's 3-D scene in the `world` frame |
 | `/skyring/state` | `skyring.SceneView` (JSON Schema) | the operator's view itself, as the API serves it |
-| `/skyring/audit` | `skyring.AuditRecord` (JSON Schema) | every operator command, accepted or refused, and who sent it |
+| `/skyring/audit` | `skyring.AuditRecord` (JSON Schema) | every command and its sender |
 | `/skyring/header` | `skyring.LogHeader` (JSON Schema) | the run's settings, first message of a log |
 | `/skyring/end` | `skyring.LogEnd` (JSON Schema) | written on a clean stop only |
 

@@ -112,7 +112,7 @@ class FlightLog:
         return self._next_sample_s is None or time_s >= self._next_sample_s - 1e-9
 
     def record_sample(self, build: Callable[[], SceneView]) -> None:
-        """Record the operator's view `build()` makes (a failure to build it is counted like a failed write)."""
+        """Record the operator's view `build()` makes (a failure to build it counts as a failed write)."""
         try:
             view = build()
         except Exception:  # noqa: BLE001 - recording must never stop the control loop

@@ -4,7 +4,8 @@ before anything changes, and turns mission snapshots into the operator's view.
 The REST API, the WebSocket and the viser GUI call the same methods here (it satisfies
 `webui.view.OperatorActions`), so there is one path for every command: each runs on behalf of the
 `webui.access.current_principal()` its surface set, is refused unless that principal is an operator, and is
-audited (accepted or refused, with who, from where and its command id) in the flight log. Ticks and commands are serialised by one lock: viser calls back from
+audited (accepted or refused, with who, from where and its command id) in the flight log. Ticks and
+commands are serialised by one lock: viser calls back from
 its own threads, the API and the live runner from the asyncio loop. With a flight log attached
 (`attach_log`), every command's audit record and a state sample every few ticks are recorded from here. The
 mission may fly any list of autopilots (the embedded simulation or PX4 vehicles): nothing here knows which.
@@ -189,7 +190,7 @@ class GroundStation:
         if principal.role is None:
             raise NotAuthorisedError("sign in as an operator to command the MAVs", signed_in=False)
         raise NotAuthorisedError(
-            f"{principal.name!r} is signed in as {principal.role.value}: only an operator may command the MAVs",
+            f"{principal.name!r} is signed in as {principal.role.value}: only an operator may command",
             signed_in=True,
         )
 

@@ -122,7 +122,7 @@ class Guard:
         await _problem(
             send,
             413,
-            f"request body larger than {self.max_body_bytes} bytes: every skyring request is a small JSON object",
+            f"request body larger than {self.max_body_bytes} bytes: every skyring request is small JSON",
             close=True,
         )
 

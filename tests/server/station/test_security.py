@@ -76,7 +76,7 @@ def digest(station) -> tuple:
     )
 
 
-# ---- users and secrets ---------------------------------------------------------------------------------------
+# ---- users and secrets
 
 
 def test_a_secret_is_stored_as_an_scrypt_hash_that_verifies_only_itself():
@@ -97,7 +97,7 @@ def test_a_user_never_shows_its_hash(users):
     assert user is not None and "scrypt" not in repr(user)
 
 
-# ---- sign-in -------------------------------------------------------------------------------------------------
+# ---- sign-in
 
 
 async def test_sign_in_gives_a_token_and_an_http_only_same_site_strict_cookie(station, users):
@@ -120,7 +120,7 @@ async def test_a_wrong_secret_is_401_and_ten_of_them_lock_the_address_out(statio
     assert [r.accepted for r in station.recent_audit if r.command == "sign_in"] == [False] * 11
 
 
-# ---- roles ---------------------------------------------------------------------------------------------------
+# ---- roles
 
 
 @pytest.mark.parametrize(("method", "url", "body"), MUTATING)
@@ -193,7 +193,7 @@ async def test_signing_out_ends_the_session(station, users):
     assert (await c.post("/api/land_all", headers=headers)).status_code == 401
 
 
-# ---- origin, host, headers -----------------------------------------------------------------------------------
+# ---- origin, host, headers
 
 
 @pytest.mark.parametrize(("method", "url", "body"), MUTATING)
@@ -231,7 +231,7 @@ async def test_every_page_carries_csp_frame_ancestors_and_nosniff(path):
     assert response.headers["x-frame-options"] == "SAMEORIGIN"
 
 
-# ---- over a real server: WebSocket, TLS ----------------------------------------------------------------------
+# ---- over a real server: WebSocket, TLS
 
 
 async def _serve(app, **ssl):
@@ -247,9 +247,7 @@ async def _serve(app, **ssl):
     return server, task, server.servers[0].sockets[0].getsockname()[1]
 
 
-async def test_the_websocket_refuses_handshakes_without_sign_in_or_from_a_foreign_origin_and_observer_commands(
-    station, users
-):
+async def test_the_websocket_refuses_anonymous_and_foreign_handshakes_and_observer_commands(station, users):
     app = create_app(station, viser_port=1, gate=Gate(users))
     server, task, port = await _serve(app)
     try:
