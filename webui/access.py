@@ -86,9 +86,10 @@ class ClientAccess(Protocol):
         """The principal of a connected viser client (not signed in: role None)."""
         ...
 
-    def client_connected(self, client_id: int, ticket: str | None) -> None:
+    def client_connected(self, client_id: int, ticket: str | None) -> bool:
         """A viser client connected carrying `ticket` (the value its forwarding front put on the
-        connection; None when it connected directly)."""
+        connection; None when it connected directly). False: refuse the connection before viser sends it
+        anything (it was not forwarded by the front that signs browsers in)."""
         ...
 
     def client_disconnected(self, client_id: int) -> None: ...
@@ -103,8 +104,8 @@ class OpenAccess:
     def principal_of(self, client_id: int) -> Principal:
         return Principal(name=self._name, role=Role.OPERATOR, surface=Surface.PAGE)
 
-    def client_connected(self, client_id: int, ticket: str | None) -> None:
-        pass
+    def client_connected(self, client_id: int, ticket: str | None) -> bool:
+        return True
 
     def client_disconnected(self, client_id: int) -> None:
         pass

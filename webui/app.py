@@ -14,6 +14,7 @@ import io
 import threading
 
 import viser
+import viser.infra
 
 from webui.access import ClientAccess, OpenAccess
 from webui.panels import OperatorPanel
@@ -57,18 +58,23 @@ class OperatorUi:
         self.server.scene.configure_default_lights(cast_shadow=shadows)
         self._lock = threading.Lock()
         self.access = access or OpenAccess()
-        self.server.on_client_connect(self._on_connect)
-        self.server.on_client_disconnect(lambda client: self.access.client_disconnected(client.client_id))
+        # viser's own connect hook runs in its event loop before it sends a new client anything (the
+        # public on_client_connect runs only after the client has received the whole scene)
+        self._websock = self.server._websock_server  # noqa: SLF001
+        self._websock.on_client_connect(self._admit)
+        self._websock.on_client_disconnect(lambda conn: self.access.client_disconnected(conn.client_id))
         self.scene = SceneRenderer(self.server.scene, sigma=sigma)
         self.panel = OperatorPanel(self.server, actions, initial, access=self.access)
         self.publish(initial)
 
-    def _on_connect(self, client: viser.ClientHandle) -> None:
-        # viser keeps each client's websocket connection (with its handshake) by client id
-        connection = self.server._websock_server._live_connections.get(client.client_id)  # noqa: SLF001
-        request = getattr(connection, "request", None)
+    async def _admit(self, connection: viser.infra.WebsockClientConnection) -> None:
+        """Match a new connection to its operator by its ticket header; close it at once, before viser
+        sends it the scene, when `access` does not admit it."""
+        socket = self._websock._live_connections.get(connection.client_id)  # noqa: SLF001
+        request = getattr(socket, "request", None)
         ticket = request.headers.get(TICKET_HEADER) if request is not None else None
-        self.access.client_connected(client.client_id, ticket)
+        if not self.access.client_connected(connection.client_id, ticket) and socket is not None:
+            await socket.close(1008, "connect through the ground station's own page (sign-in)")
 
     @property
     def port(self) -> int:

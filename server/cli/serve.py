@@ -51,6 +51,13 @@ def open_log(path: Path, *, header: LogHeader) -> FlightLog:
         ) from None
 
 
+def log_line(flight_log: FlightLog | None) -> str:
+    """The printed line saying where the run is recorded."""
+    if flight_log is None or not flight_log.recording:
+        return "flight log:     off"
+    return f"flight log:     {flight_log.name}"
+
+
 def describe_log(flight_log: FlightLog) -> str:
     """One line about a closed flight log: where, what it holds, and any records lost."""
     lost = f"; {flight_log.write_errors} records could not be written" if flight_log.write_errors else ""
@@ -89,9 +96,7 @@ def security_options(
     }
 
 
-def start_foxglove(
-    port: int | None, *, host: str, flight_log: FlightLog | None, header: LogHeader, secured: bool
-):
+def start_foxglove(port: int | None, *, flight_log: FlightLog | None, header: LogHeader):
     """`--foxglove PORT`: the flight log's channels live over Foxglove's WebSocket protocol on 127.0.0.1
     (its server has no sign-in, so it never listens beyond loopback). Returns (server, log to publish to)."""
     if port is None:
@@ -151,7 +156,7 @@ def run(
             if gate is not None and not gate.open
             else "sign-in:        off (loopback only: anyone on this machine is the operator)"
         )
-        typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
+        typer.echo(log_line(flight_log))
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
     if flight_log is not None:
@@ -176,7 +181,7 @@ def run(
         + (f", fell behind {stats.lagged} times" if stats.lagged else "")
         + ")"
     )
-    if flight_log is not None:
+    if flight_log is not None and flight_log.recording:
         typer.echo(describe_log(flight_log))
 
 
@@ -295,7 +300,7 @@ def serve(
         started_utc=utc_now_iso(),
     )
     flight_log = None if log_path is None else open_log(log_path, header=header)
-    fox, flight_log = start_foxglove(foxglove, host=host, flight_log=flight_log, header=header, secured=False)
+    fox, flight_log = start_foxglove(foxglove, flight_log=flight_log, header=header)
     try:
         station = build_station(
             vehicles=vehicles, seed=seed, method=method, trees=trees, person=person, rate_hz=rate
@@ -303,6 +308,8 @@ def serve(
     except BaseException:
         if flight_log is not None:
             flight_log.close()
+        if fox is not None:
+            fox.stop()
         raise
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
@@ -358,7 +365,7 @@ def run_px4(
         typer.echo(f"PX4 vehicles:   {', '.join(urls)}")
         typer.echo(f"operator view:  {urls_.api}  (3-D page alone: {urls_.operator})")
         typer.echo(f"API and docs:   {urls_.api}docs")
-        typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
+        typer.echo(log_line(flight_log))
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
     header = LogHeader(
@@ -375,9 +382,7 @@ def run_px4(
         vehicle_urls=tuple(urls),
     )
     flight_log = None if log_path is None else open_log(log_path, header=header)
-    fox, flight_log = start_foxglove(
-        foxglove_port, host=host, flight_log=flight_log, header=header, secured=False
-    )
+    fox, flight_log = start_foxglove(foxglove_port, flight_log=flight_log, header=header)
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
     try:
         stats = asyncio.run(
@@ -406,5 +411,5 @@ def run_px4(
         if fox is not None:
             fox.stop()
     typer.echo(f"stopped after {stats.ticks} control ticks")
-    if flight_log is not None:
+    if flight_log is not None and flight_log.recording:
         typer.echo(describe_log(flight_log))

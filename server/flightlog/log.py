@@ -5,7 +5,7 @@ What a crash loses: the SDK collects messages into a chunk in memory; this write
 it to the kernel (`flush`) at least once a second and right after every audit record, and fsyncs the file
 once a second, so a kill -9 of the ground station loses at most the last second of state samples and no
 audit record, and a power cut at most about a second more (measured by
-`tests/server/flightlog/test_crash.py`). A log cut short has no summary section: the reader
+`tests/server/flightlog/test_flight_log.py::test_a_kill_9_loses_at_most_the_last_second_and_the_cut_log_replays`). A log cut short has no summary section: the reader
 (`server.flightlog.reader`) reads it record by record up to the cut.
 
 Why it never stops the MAVs: every failure to build or write a record is caught here, logged once and
@@ -92,6 +92,11 @@ class FlightLog:
         self.channels = SkyringChannels(self.context)
         self.channels.log_header(header, self._wall_ns())
         self._flush(sync=True, raise_errors=True)  # a log that cannot even start is refused up front
+
+    @property
+    def recording(self) -> bool:
+        """Whether this log writes a file (False: it only publishes, to a live Foxglove client)."""
+        return self._file is not None
 
     @classmethod
     def create(cls, path: Path, *, header: LogHeader, context: foxglove.Context | None = None) -> FlightLog:

@@ -38,7 +38,15 @@ from server.station.commands import (
 from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
 from webui.access import Principal, current_principal
-from webui.view import CameraView, Counters, Range, SceneView, VehicleView
+from webui.view import (
+    CameraView,
+    Counters,
+    ObstacleView,
+    PersonEstimateView,
+    Range,
+    SceneView,
+    VehicleView,
+)
 
 FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)
 
@@ -498,7 +506,7 @@ def scene_view(
     return SceneView(
         time_s=snap.stamp_s,
         vehicles=tuple(vehicle_view(v, link_stale_s=link_stale_s) for v in snap.vehicles),
-        obstacles=snap.obstacles,
+        obstacles=tuple(ObstacleView.of(o) for o in snap.obstacles),
         formation=snap.formation,
         formation_enabled=snap.formation_enabled,
         arena_min_m=np.array(limits.arena_min_m),
@@ -507,7 +515,7 @@ def scene_view(
         h_des_range_m=Range(*h_range),
         obstacle_radius_range_m=Range(0.1, limits.max_obstacle_radius_m),
         person_truth_m=truth,
-        person_estimate=best[2] if best else None,
+        person_estimate=PersonEstimateView.of(best[2]) if best else None,
         estimate_source_id=best[1] if best else None,
         tracking_error_m=error,
         camera=camera or CameraView(),

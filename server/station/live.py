@@ -261,8 +261,9 @@ async def serve_station(
         stop.set()
         await runner_task
         stop_task.cancel()
-        if serve_task.done() and not serve_task.cancelled() and serve_task.exception() is not None:
-            raise serve_task.exception()
+        failed = serve_task.exception() if serve_task.done() and not serve_task.cancelled() else None
+        if failed is not None:
+            raise failed
         return runner.stats
     finally:
         for sig in installed:

@@ -10,18 +10,24 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from playwright.sync_api import Browser, FrameLocator, Locator, Page
 from viser import transforms as tf
 
+from server.station.api.gate import Gate
+from server.station.api.users import Users, user_line
 from server.station.ground_station import GroundStation
 from server.station.live import Urls, serve_station
 from vehicles.mission import Phase
 from vehicles.sim.scenario import Scenario, build_sim
+from webui.access import Role
+from webui.app import OperatorUi
 
 RATE_HZ = 20.0  # control rate of the live station in these tests (20 Hz; the MPC's own step is 0.1 s)
 SPEED = 4.0  # simulated seconds per wall second
+PAGE_LOAD_TIMEOUT_MS = 60_000  # the viser page on a software renderer, on a 2-core machine shared with others
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 CHROMIUM_ARGS = [
     "--headless",
@@ -35,13 +41,28 @@ CHROMIUM_ARGS = [
 ]
 
 
+OPERATOR = ("alice", "alice-secret-1")  # name, secret
+OBSERVER = ("bob", "bob-secret-22")
+
+
+def signed_in_gate() -> Gate:
+    """A gate that requires sign-in, with OPERATOR (role operator) and OBSERVER (role observer)."""
+    text = "\n".join(
+        [
+            user_line(OPERATOR[0], Role.OPERATOR, OPERATOR[1]),
+            user_line(OBSERVER[0], Role.OBSERVER, OBSERVER[1]),
+        ]
+    )
+    return Gate(Users.parse(text, source="test users"))
+
+
 @dataclass
 class Live:
     """A running ground station: its station, URLs and viser UI, and the thread that serves them."""
 
     station: GroundStation
     urls: Urls
-    ui: object
+    ui: OperatorUi
     stop: Callable[[], None]
     pages: list[Page] = field(default_factory=list)
 
@@ -59,18 +80,26 @@ class Live:
     def mean_horizontal_distance_m(self) -> float:
         with self.station.lock:
             snap = self.station.snapshot()
+            assert snap.person_truth is not None, "the embedded simulation knows where the person is"
             person = snap.person_truth.position_m[:2]
-            return float(np.mean([np.hypot(*(v.autopilot.position_m[:2] - person)) for v in snap.vehicles]))
+            return float(
+                np.mean(
+                    [np.hypot(*(v.autopilot.position_m[:2] - person)) for v in snap.vehicles if v.autopilot]
+                )
+            )
 
     def phases(self) -> set[Phase]:
         return {v.phase for v in self.station.snapshot().vehicles}
 
 
-def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thread]:
+def start_live(
+    *, vehicles: int = 3, seed: int = 5, gate: Gate | None = None
+) -> tuple[Live, threading.Thread]:
+    """Serve a simulated team in a background thread (gate: sign-in rules; None: open, loopback only)."""
     setup = build_sim(Scenario(vehicles=vehicles, seed=seed), clock=time.perf_counter)
     station = GroundStation(mission=setup.mission, control_period_s=1.0 / RATE_HZ)
     ready = threading.Event()
-    box: dict[str, object] = {}
+    box: dict[str, Any] = {}
     loop = asyncio.new_event_loop()
     stop_event = asyncio.Event()
 
@@ -91,6 +120,7 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
                     stop=stop_event,
                     on_ready=on_ready,
                     handle_signals=False,
+                    gate=gate,
                 )
             )
         except BaseException as exc:  # noqa: BLE001 - reported to the test thread below
@@ -104,12 +134,11 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
     assert ready.wait(30.0), "the ground station did not start within 30 s"
     if "error" in box:
         raise box["error"]
-    live = Live(
-        station=station,
-        urls=box["urls"],
-        ui=box["ui"],
-        stop=lambda: loop.call_soon_threadsafe(stop_event.set),
-    )
+
+    def stop() -> None:
+        loop.call_soon_threadsafe(stop_event.set)
+
+    live = Live(station=station, urls=box["urls"], ui=box["ui"], stop=stop)
     return live, thread
 
 
@@ -128,10 +157,9 @@ class OpenPage:
         return self.page.frame_locator("#operator-view")
 
 
-def open_page(browser: Browser, url: str, *, ui=None) -> OpenPage:
-    """Open `url` in a new context, recording console errors, page errors and every request URL; wait for the
-    operator page's canvas and controls. With the station's `ui`, also find the page's viser client (the one
-    that connected last)."""
+def new_page(browser: Browser) -> OpenPage:
+    """A page in a new browser context (its own cookies), recording console errors, page errors and every
+    request URL."""
     context = browser.new_context(viewport={"width": 1100, "height": 700})
     page = context.new_page()
     opened = OpenPage(page=page, console_errors=[], requests=[])
@@ -139,13 +167,39 @@ def open_page(browser: Browser, url: str, *, ui=None) -> OpenPage:
     page.on("pageerror", lambda e: opened.console_errors.append(str(e)))
     page.on("request", lambda r: opened.requests.append(r.url))
     page.on("websocket", lambda ws: opened.requests.append(ws.url))
-    page.goto(url)
-    frame = page.frame_locator("#operator-view")
-    frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
-    frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=30_000)
+    return opened
+
+
+def wait_for_operator_view(opened: OpenPage, *, ui=None) -> OpenPage:
+    """Wait for the embedded operator page's canvas and controls; with the station's `ui`, also find the
+    page's viser client (the one that connected last)."""
+    frame = opened.page.frame_locator("#operator-view")
+    frame.locator("canvas").first.wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
+    frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
     if ui is not None:
         opened.client = newest_client(ui)
     return opened
+
+
+def open_page(browser: Browser, url: str, *, ui=None) -> OpenPage:
+    """Open the landing page `url` in a new context and wait for the operator view (see
+    `wait_for_operator_view`)."""
+    opened = new_page(browser)
+    opened.page.goto(url)
+    return wait_for_operator_view(opened, ui=ui)
+
+
+def sign_in(browser: Browser, url: str, user: tuple[str, str], *, ui=None) -> OpenPage:
+    """Open the landing page `url` of a station that requires sign-in, as a browser would: it sends the page
+    to the sign-in form; type `user` (name, secret) into it, and wait for the operator view."""
+    opened = new_page(browser)
+    opened.page.goto(url)
+    opened.page.wait_for_url("**/login?next=/")
+    opened.page.fill("#name", user[0])
+    opened.page.fill("#secret", user[1])
+    opened.page.click("#sign-in")
+    opened.page.wait_for_url(url)
+    return wait_for_operator_view(opened, ui=ui)
 
 
 def close_page(opened: OpenPage) -> None:

@@ -4,6 +4,8 @@ the operator's view types themselves (`webui.view`), so they are not repeated he
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import BaseModel, ConfigDict, Field
 
 
@@ -71,11 +73,15 @@ class LandAll(BaseModel):
     landing: list[int] = Field(description="the MAVs told to land")
 
 
-def problem(description: str) -> dict:
+Responses = dict[int | str, dict[str, Any]]
+"""FastAPI's `responses=`: status -> OpenAPI response (model and description)."""
+
+
+def problem(description: str) -> dict[str, Any]:
     return {"model": Problem, "description": description}
 
 
-COMMON_REFUSALS = {
+COMMON_REFUSALS: Responses = {
     400: problem("the body is not JSON, or a bad Content-Length or Host"),
     401: problem("not signed in (the station requires sign-in)"),
     403: problem("signed in as an observer, or sent from a page of another origin"),

@@ -5,7 +5,8 @@ station's origin, sign-in, Origin check and security headers.
 viser has no hook to tell who a connection belongs to, so each forwarded connection carries a fresh random
 ticket header (`webui.app.TICKET_HEADER`) bound to the browser's session; `TicketAccess` turns a viser
 client id back into that operator (re-checking the session on every use, so a sign-out takes control away at
-once). A connection straight to viser's internal port carries no ticket and may not command.
+once). A connection straight to viser's internal port carries no ticket and is closed before viser sends
+it anything, so a local web page cannot read the scene or command through that port either.
 """
 
 from __future__ import annotations
@@ -52,9 +53,14 @@ class TicketAccess:
         with self._lock:
             self._tickets.pop(ticket, None)
 
-    def client_connected(self, client_id: int, ticket: str | None) -> None:
+    def client_connected(self, client_id: int, ticket: str | None) -> bool:
+        """Admit a viser client only with a ticket this front issued for a connection it is forwarding."""
         with self._lock:
-            self._clients[client_id] = self._tickets.get(ticket or "", (None, "direct"))
+            issued = self._tickets.get(ticket or "")
+            if issued is None:
+                return False
+            self._clients[client_id] = issued
+            return True
 
     def client_disconnected(self, client_id: int) -> None:
         with self._lock:
@@ -62,9 +68,10 @@ class TicketAccess:
 
     def principal_of(self, client_id: int) -> Principal:
         with self._lock:
-            token, remote = self._clients.get(client_id, (None, "direct"))
-        if remote == "direct":  # not forwarded by this front: nobody vouches for it
-            return Principal(name="", role=None, surface=Surface.PAGE, remote=remote)
+            known = self._clients.get(client_id)
+        if known is None:  # not forwarded by this front (refused at connect): nobody vouches for it
+            return Principal(name="", role=None, surface=Surface.PAGE, remote="direct")
+        token, remote = known
         return self._gate.principal(token, surface=Surface.PAGE, remote=remote)
 
 

@@ -12,7 +12,14 @@ from fastapi.responses import Response
 from pydantic import TypeAdapter
 
 from server.station.api.deps import Commander, json_response, station_of
-from server.station.api.models import COMMON_REFUSALS, FormationRequest, LandAll, ObstacleRequest, problem
+from server.station.api.models import (
+    COMMON_REFUSALS,
+    FormationRequest,
+    LandAll,
+    ObstacleRequest,
+    Responses,
+    problem,
+)
 from server.station.api.routes_state import FORMATION
 from webui.access import acting_as
 from webui.schema import VEHICLE
@@ -20,7 +27,7 @@ from webui.view import FormationState, ObstacleView, VehicleView
 
 OBSTACLE = TypeAdapter(ObstacleView)
 LAND_ALL = TypeAdapter(LandAll)
-NOT_FOUND = {404: problem("no such vehicle or obstacle")}
+NOT_FOUND: Responses = {404: problem("no such vehicle or obstacle")}
 ObstacleId = Annotated[str, Path(min_length=1, max_length=64, description="e.g. v1")]
 VehicleId = Annotated[int, Path(ge=0, le=1_000_000, description="1..K")]
 

@@ -189,11 +189,13 @@ async def stream(websocket: WebSocket) -> None:
             while True:
                 frame_task = asyncio.ensure_future(feed.next_frame(seen))
                 reply_task = asyncio.ensure_future(replies.get())
-                done, pending = await asyncio.wait(
-                    {frame_task, reply_task}, return_when=asyncio.FIRST_COMPLETED
-                )
-                for task in pending:
-                    task.cancel()
+                try:
+                    done, _ = await asyncio.wait(
+                        {frame_task, reply_task}, return_when=asyncio.FIRST_COMPLETED
+                    )
+                finally:  # also when this writer is cancelled: no waiter outlives it
+                    for task in (frame_task, reply_task):
+                        task.cancel()
                 if reply_task in done:
                     await asyncio.wait_for(
                         websocket.send_text(json.dumps(reply_task.result())), SEND_TIMEOUT_S

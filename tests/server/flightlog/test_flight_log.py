@@ -4,6 +4,7 @@ the last second off and that stays readable, and its replay (summary, audit, pla
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import os
@@ -37,8 +38,8 @@ _register("serve", COMMANDS["serve"])
 ALICE = Principal(name="alice", role=Role.OPERATOR, surface=Surface.API, remote="192.0.2.7:5555")
 
 
-def header(**overrides) -> LogHeader:
-    fields = dict(
+def header(**overrides: object) -> LogHeader:
+    base = LogHeader(
         command="serve",
         vehicles=3,
         seed=3,
@@ -50,8 +51,7 @@ def header(**overrides) -> LogHeader:
         sample_rate_hz=5.0,
         started_utc="2025-06-01T12:00:00+00:00",
     )
-    fields.update(overrides)
-    return LogHeader(**fields)
+    return dataclasses.replace(base, **overrides)
 
 
 def make_station() -> GroundStation:

@@ -46,20 +46,24 @@ def test_a_20_mb_body_gets_413_and_the_process_grows_by_less_than_50_mb():
             f"{api}api/obstacles", content=body, headers={"content-type": "application/json"}, timeout=30
         )
 
+        offered = 0
+
         def chunks():
+            nonlocal offered
             for i in range(0, BODY_BYTES, 1 << 20):
+                offered += 1 << 20
                 yield body[i : i + (1 << 20)]
 
         try:
             streamed = httpx.post(f"{api}api/land_all", content=chunks(), timeout=30).status_code
-        except httpx.HTTPError:
-            streamed = 413  # the station answered and closed while the client was still sending
+        except httpx.HTTPError:  # the station answered and closed while the client was still sending:
+            streamed = None  # it stopped reading (checked below), the answer was lost with the connection
         grown = rss_bytes(proc.pid) - before
         state = httpx.get(f"{api}api/state", timeout=10).json()
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=60)
     assert declared.status_code == 413 and "larger than 65536 bytes" in declared.json()["detail"]
-    assert streamed == 413
+    assert streamed == 413 or (streamed is None and offered < BODY_BYTES)
     assert grown < 50 * 1024 * 1024, f"grew by {grown / 1e6:.1f} MB"
     assert all(v["phase"] != "landing" for v in state["vehicles"])  # nothing was commanded

@@ -13,6 +13,7 @@ import pytest
 import uvicorn
 import websockets
 from test_api import RATE_HZ, make_station
+from websockets.typing import Origin
 
 from server.station.api import create_app
 from server.station.api.gate import SESSION_COOKIE, Gate
@@ -259,7 +260,9 @@ async def test_the_websocket_refuses_anonymous_and_foreign_handshakes_and_observ
             observer, operator = await sign_in(c, *OBSERVER), await sign_in(c, *OPERATOR)
         with pytest.raises(websockets.exceptions.InvalidStatus, match="403"):
             async with websockets.connect(
-                url, additional_headers={"authorization": f"Bearer {operator}"}, origin="http://evil.example"
+                url,
+                additional_headers={"authorization": f"Bearer {operator}"},
+                origin=Origin("http://evil.example"),
             ):
                 pass
         before = digest(station)
