@@ -2,11 +2,11 @@
 lists its channels), which opens in Foxglove with a 3-D panel of the operator's scene.
 
 What a crash loses: the SDK collects messages into a chunk in memory; this writer closes the chunk and hands
-it to the kernel (`flush`) at least once a second and right after every audit record, and fsyncs the file
-once a second, so a kill -9 of the ground station loses at most the last second of state samples and no
-audit record, and a power cut at most about a second more (measured by
-`tests/server/flightlog/test_flight_log.py::test_a_kill_9_loses_at_most_the_last_second_and_the_cut_log_replays`). A log cut short has no summary section: the reader
-(`server.flightlog.reader`) reads it record by record up to the cut.
+it to the kernel (`flush`) every `FLUSH_PERIOD_S` and right after every audit record, and fsyncs the file at
+that period, so a kill -9 of the ground station loses at most the last second of state samples and no audit
+record (measured by the kill -9 test in `tests/server/flightlog/test_flight_log.py`); a power cut can also
+lose what was flushed but not yet fsynced, under a second more. A log cut short has no summary section: the
+reader (`server.flightlog.reader`) reads it record by record up to the cut.
 
 Why it never stops the MAVs: every failure to build or write a record is caught here, logged once and
 counted (`write_errors`); the ground station keeps flying without the records it could not write.
