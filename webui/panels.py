@@ -47,13 +47,17 @@ def vehicle_card(vehicle: VehicleView) -> str:
 
 
 def status_line(view: SceneView) -> str:
-    """Markdown summary at the top of the panel: time, formation state and the team's size in formation."""
+    """Markdown summary at the top of the panel: time, formation state, the team's size in formation, and
+    the alerts (critical ones in bold)."""
     flying = sum(v.in_formation for v in view.vehicles)
     state = "running" if view.formation_enabled else "stopped (holding)"
+    alerts = "".join(
+        f"  \n{'**CRITICAL**' if a.level == 'critical' else 'warning'}: {a.message}" for a in view.alerts
+    )
     return (
         f"t = {view.time_s:.1f} s · formation {state} · "
         f"{flying}/{len(view.vehicles)} MAVs flying formation  \n"
-        f"d_des {view.formation.d_des_m:.1f} m · h_des {view.formation.h_des_m:.1f} m"
+        f"d_des {view.formation.d_des_m:.1f} m · h_des {view.formation.h_des_m:.1f} m{alerts}"
     )
 
 

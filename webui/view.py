@@ -142,6 +142,16 @@ class PersonEstimateView:
 
 
 @dataclass(frozen=True)
+class Alert:
+    """Something the operator should look at now: level "critical" (act: a MAV may be out of control) or
+    "warning", the MAV it concerns (None: the team), and what it is, in words."""
+
+    level: str
+    message: str
+    vehicle_id: int | None = None
+
+
+@dataclass(frozen=True)
 class Counters:
     """Bad inputs refused and counted since the start: operator commands refused, detections the trackers
     gated out (stale or invalid), malformed or misaddressed messages between MAVs, controller exceptions
@@ -163,7 +173,8 @@ class SceneView:
     estimate_source_id: the MAV whose tracker replica it comes from; tracking_error_m: mean over MAVs of
     |estimate - truth| (simulation only, else None); arena_min_m / arena_max_m (3,): the box the MAVs fly
     in; d_des_range_m / h_des_range_m / obstacle_radius_range_m: what the operator may set (the same limits
-    the ground station enforces); counters: bad inputs refused so far. Obstacles and the estimate may be
+    the ground station enforces); counters: bad inputs refused so far; alerts: what needs the operator's
+    attention now (critical first). Obstacles and the estimate may be
     given as the controller's `Obstacle` / `PersonEstimate`: they are kept as their view types.
     """
 
@@ -183,9 +194,11 @@ class SceneView:
     tracking_error_m: float | None = None
     camera: CameraView = field(default_factory=CameraView)
     counters: Counters = field(default_factory=Counters)
+    alerts: tuple[Alert, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vehicles", tuple(self.vehicles))
+        object.__setattr__(self, "alerts", tuple(self.alerts))
         object.__setattr__(self, "obstacles", tuple(ObstacleView.of(o) for o in self.obstacles))
         if self.person_estimate is not None:
             object.__setattr__(self, "person_estimate", PersonEstimateView.of(self.person_estimate))

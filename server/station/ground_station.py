@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.messages import Obstacle
+from controller.messages import Obstacle, SolveStatus
 from server.flightlog.log import FlightLog, utc_now_iso
 from server.flightlog.records import AuditRecord, scalar
 from server.station.commands import (
@@ -39,6 +39,7 @@ from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
 from webui.access import Principal, current_principal
 from webui.view import (
+    Alert,
     CameraView,
     Counters,
     ObstacleView,
@@ -503,9 +504,10 @@ def scene_view(
         error = float(np.mean([np.linalg.norm(e[2].position_m - truth) for e in estimates]))
     team = sum(v.phase in FLYING_PHASES for v in snap.vehicles)
     d_range, h_range = limits.d_des_range_m(max(team, 1)), limits.h_des_range_m()
+    vehicles = tuple(vehicle_view(v, link_stale_s=link_stale_s) for v in snap.vehicles)
     return SceneView(
         time_s=snap.stamp_s,
-        vehicles=tuple(vehicle_view(v, link_stale_s=link_stale_s) for v in snap.vehicles),
+        vehicles=vehicles,
         obstacles=tuple(ObstacleView.of(o) for o in snap.obstacles),
         formation=snap.formation,
         formation_enabled=snap.formation_enabled,
@@ -520,4 +522,28 @@ def scene_view(
         tracking_error_m=error,
         camera=camera or CameraView(),
         counters=counters or Counters(),
+        alerts=alerts_of(vehicles, tracking=best is not None),
     )
+
+
+LOW_BATTERY, CRITICAL_BATTERY = 0.3, 0.15  # fractions of a full battery
+
+
+def alerts_of(vehicles: tuple[VehicleView, ...], *, tracking: bool) -> tuple[Alert, ...]:
+    """What the operator should look at now, critical first: a flying MAV without telemetry or with a nearly
+    empty battery (critical); a low battery, a MAV braking because its MPC found no plan, a team in
+    formation with no person estimate (warnings)."""
+    alerts: list[Alert] = []
+    for v in vehicles:
+        flying = v.in_air or v.phase in {p.value for p in FLYING_PHASES}
+        if v.link_stale and flying:
+            age = "yet" if not math.isfinite(v.link_age_s) else f"for {v.link_age_s:.1f} s"
+            alerts.append(Alert("critical", f"MAV {v.vehicle_id}: no telemetry {age}", v.vehicle_id))
+        if v.battery_fraction is not None and v.battery_fraction < LOW_BATTERY:
+            level = "critical" if v.battery_fraction < CRITICAL_BATTERY else "warning"
+            alerts.append(Alert(level, f"MAV {v.vehicle_id}: battery {v.battery_fraction:.0%}", v.vehicle_id))
+        if v.in_formation and v.solve_status == SolveStatus.BRAKING.value:
+            alerts.append(Alert("warning", f"MAV {v.vehicle_id}: no MPC plan, braking", v.vehicle_id))
+    if any(v.in_formation for v in vehicles) and not tracking:
+        alerts.append(Alert("warning", "no person estimate: the team holds position"))
+    return tuple(sorted(alerts, key=lambda a: a.level != "critical"))
