@@ -85,8 +85,9 @@ def test_the_operator_page_controls_work_only_while_signed_in(secured_live, brow
         assert land_all == 401
         assert (stream["opened"], stream["messages"]) == (False, 0)
         assert (operator["opened"], operator["messages"]) == (False, 0)
-        page.goto("about:blank")  # a page without the station's CSP, trying viser's internal port straight
-        direct = page.evaluate(PROBE_SOCKET_JS, list(viser_socket(live)))
+        with foreign_site("<!doctype html><title>a local page</title>") as url:
+            page.goto(url)  # a page without the station's CSP, trying viser's internal port straight
+            direct = page.evaluate(PROBE_SOCKET_JS, list(viser_socket(live)))
         assert (direct["messages"], direct["code"]) == (0, 1008)  # closed before it is sent any scene
         assert digest(live) == before
         assert len(live.ui.server.get_clients()) == clients  # no operator page connected
