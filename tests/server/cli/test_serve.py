@@ -40,6 +40,7 @@ def start_serve(*args: str) -> subprocess.Popen:
 def read_until(proc: subprocess.Popen, pattern: str, *, timeout_s: float) -> tuple[re.Match, str]:
     """Read the command's output until a line matches; fail after timeout_s."""
     seen = ""
+    assert proc.stdout is not None
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
