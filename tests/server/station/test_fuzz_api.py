@@ -13,6 +13,15 @@ from server.station.ground_station import GroundStation
 from vehicles.sim.scenario import Scenario, build_sim
 
 EXAMPLES = 100  # per operation
+ALL_HEALTH_CHECKS = [  # the requests are slow-ish and filtered by design; none of these says the API is wrong
+    HealthCheck.data_too_large,
+    HealthCheck.filter_too_much,
+    HealthCheck.too_slow,
+    HealthCheck.large_base_example,
+    HealthCheck.function_scoped_fixture,
+    HealthCheck.differing_executors,
+    HealthCheck.nested_given,
+]
 
 station = GroundStation(mission=build_sim(Scenario(vehicles=3, seed=3)).mission, control_period_s=0.05)
 for _ in range(20):
@@ -36,7 +45,7 @@ def digest() -> tuple:
 @settings(
     max_examples=EXAMPLES,
     deadline=None,
-    suppress_health_check=list(HealthCheck.__members__.values()),
+    suppress_health_check=ALL_HEALTH_CHECKS,
     derandomize=True,
 )
 def test_every_operation_conforms_and_refusals_change_nothing(case):
