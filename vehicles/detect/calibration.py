@@ -67,14 +67,18 @@ class Calibration:
             raise CalibrationError(f"image size must be positive, got {self.width_px} x {self.height_px}")
         k = self.camera_matrix
         if not (np.all(np.isfinite(k)) and k[0, 0] > 0 and k[1, 1] > 0 and np.allclose(k[2], [0, 0, 1])):
-            raise CalibrationError("camera_matrix must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+            raise CalibrationError(
+                "camera_matrix must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0"
+            )
         if self.distortion.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(self.distortion)):
             raise CalibrationError(
                 f"distortion_coefficients must hold 4, 5, 8, 12 or 14 finite numbers, got {self.distortion.size}"
             )
         r = self.camera_to_body_rotation
         if not (np.allclose(r.T @ r, np.eye(3), atol=1e-6) and abs(np.linalg.det(r) - 1.0) < 1e-6):
-            raise CalibrationError("camera_to_body_rotation must be a proper rotation matrix (R^T R = I, det 1)")
+            raise CalibrationError(
+                "camera_to_body_rotation must be a proper rotation matrix (R^T R = I, det 1)"
+            )
         if not np.all(np.isfinite(self.camera_to_body_translation_m)):
             raise CalibrationError("camera_to_body_translation_m must be finite")
 
@@ -142,7 +146,9 @@ class Calibration:
             fs.write("camera_matrix", np.array(self.camera_matrix))
             fs.write("distortion_coefficients", np.array(self.distortion).reshape(1, -1))
             fs.write("camera_to_body_rotation", np.array(self.camera_to_body_rotation))
-            fs.write("camera_to_body_translation_m", np.array(self.camera_to_body_translation_m).reshape(3, 1))
+            fs.write(
+                "camera_to_body_translation_m", np.array(self.camera_to_body_translation_m).reshape(3, 1)
+            )
         finally:
             fs.release()
 

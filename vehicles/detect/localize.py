@@ -75,7 +75,12 @@ class LocalizeParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {value}")
-        for name in ("person_height_sigma_m", "point_sigma_fraction", "attitude_sigma_rad", "image_margin_px"):
+        for name in (
+            "person_height_sigma_m",
+            "point_sigma_fraction",
+            "attitude_sigma_rad",
+            "image_margin_px",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value}")
@@ -133,7 +138,10 @@ def localize(
     if pose is None:
         return Localized(None, Rejection.NO_POSE)
     cam = calibration.camera_pose(
-        body_position_m=pose.position_m, yaw_rad=pose.yaw_rad, pitch_rad=pose.pitch_rad, roll_rad=pose.roll_rad
+        body_position_m=pose.position_m,
+        yaw_rad=pose.yaw_rad,
+        pitch_rad=pose.pitch_rad,
+        roll_rad=pose.roll_rad,
     )
     d_h, d_f = _rays(calibration, cam.rotation, pixels)
     big_h = params.person_height_m
@@ -153,7 +161,9 @@ def localize(
     f_px = 0.5 * (calibration.fx_px + calibration.fy_px)
     range_fraction = math.hypot(params.person_height_sigma_m / big_h, math.sqrt(2.0) * sigma_px / height_px)
     angle = math.hypot(sigma_px / math.sqrt(2.0) / f_px, params.attitude_sigma_rad)
-    noise = NoiseParams(range_sigma_fraction=range_fraction, bearing_sigma_rad=angle, inclination_sigma_rad=angle)
+    noise = NoiseParams(
+        range_sigma_fraction=range_fraction, bearing_sigma_rad=angle, inclination_sigma_rad=angle
+    )
     cov = spherical_covariance(camera_position_m=cam.position_m, target_position_m=centre, noise=noise)
     if params.add_pose_covariance:
         cov = cov + pose.position_cov_m2
