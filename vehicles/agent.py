@@ -80,7 +80,8 @@ class AgentInputs:
     own: the autopilot's latest state (None before the first telemetry); detections: the MAV's own camera
     detections since the last tick, already in the world frame (the simulated camera); camera: the MAV's own
     camera's pixel detections since the last tick (a real camera through `skyring detect`), converted here
-    with the pose at their capture time (needs the agent's `converter`); received: teammates' messages delivered since the last tick; obstacles:
+    with the pose at their capture time (needs the agent's `converter`); received: teammates' messages
+    delivered since the last tick; obstacles:
     static and virtual; formation: the operator's d_des/h_des; role: see AgentRole; roster: (vehicle id, slot
     bearing) of every MAV in formation, this one included, the bearing (ENU, about the person) being
     offset + 2 pi k / K; used for teammates that are unheard.

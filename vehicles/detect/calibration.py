@@ -11,10 +11,10 @@ for the mount:
                                                # z (optical axis) in the body's forward-left-up axes
     camera_to_body_translation_m: !!opencv-matrix  # 3 x 1: the optical centre in the body frame, metres
 
-So a file from `calibrateCamera` works after the two mount nodes are added (`skyring detect --write-calibration`
-writes a complete template). A missing or inconsistent node is a clear error naming the node and the file.
-The default (`Calibration.from_camera_params`) is the simulated camera of vehicles/camera.py: 45 degrees down,
-0.18 m ahead of the body centre, no distortion.
+So a file from `calibrateCamera` works after the two mount nodes are added (`skyring detect
+--write-calibration` writes a complete template). A missing or inconsistent node is a clear error naming the
+node and the file. The default (`Calibration.from_camera_params`) is the simulated camera of
+vehicles/camera.py: 45 degrees down, 0.18 m ahead of the body centre, no distortion.
 """
 
 from __future__ import annotations
@@ -72,7 +72,8 @@ class Calibration:
             )
         if self.distortion.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(self.distortion)):
             raise CalibrationError(
-                f"distortion_coefficients must hold 4, 5, 8, 12 or 14 finite numbers, got {self.distortion.size}"
+                "distortion_coefficients must hold 4, 5, 8, 12 or 14 finite numbers, "
+                f"got {self.distortion.size}"
             )
         r = self.camera_to_body_rotation
         if not (np.allclose(r.T @ r, np.eye(3), atol=1e-6) and abs(np.linalg.det(r) - 1.0) < 1e-6):
@@ -118,7 +119,7 @@ class Calibration:
         return CameraPose(position_m=position, rotation=rotation)
 
     def normalized(self, pixels: np.ndarray) -> np.ndarray:
-        """(M, 2) undistorted normalised image coordinates (x/z, y/z in the camera frame) of raw pixels (M, 2).
+        """(M, 2) undistorted normalised image coordinates (x/z, y/z, camera frame) of raw pixels (M, 2).
 
         Pinhole inversion when there is no distortion; otherwise OpenCV's iterative undistortPoints.
         """

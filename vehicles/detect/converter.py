@@ -85,7 +85,7 @@ class DetectionConverter:
         return self._calibration
 
     def record_pose(self, state: AutopilotState) -> None:
-        """Add the MAV's believed pose from a telemetry reading (a reading older than the newest is ignored)."""
+        """Add the MAV's believed pose from a telemetry reading (one older than the newest is ignored)."""
         self._history.add(
             PoseSample(
                 stamp_s=state.stamp_s,

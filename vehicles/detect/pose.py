@@ -72,7 +72,7 @@ def head_and_feet(landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray, float,
 
 
 class MediaPipePose:
-    """A pose-landmark estimator in a child process; `estimate(crop)` -> (landmarks (33, 3) or None, presence)."""
+    """A pose-landmark estimator in a child process: `estimate(crop)` -> (landmarks or None, presence)."""
 
     def __init__(
         self, *, python: Path | None = None, timeout_s: float = 5.0, start_timeout_s: float = 60.0
@@ -112,7 +112,7 @@ class MediaPipePose:
         self.version = str(hello.get("mediapipe", ""))
 
     def estimate(self, crop_rgb: np.ndarray, *, mode: str = "roi") -> tuple[np.ndarray | None, float]:
-        """(landmarks (33, 3) of x_px, y_px in the crop and visibility in [0, 1], or None; presence in [0, 1]).
+        """(landmarks (33, 3): x_px, y_px in the crop, visibility in [0, 1]; or None), presence in [0, 1].
 
         crop_rgb: (H, W, 3) uint8 RGB. mode "roi": the landmark model on this crop as its region of interest
         (it must be ROI_PX square; the person centred, about 3/4 of its height); "full": MediaPipe's person

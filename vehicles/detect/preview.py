@@ -68,11 +68,9 @@ class MjpegServer:
                 self.end_headers()
                 seen = -1
                 while True:
-                    with owner._cond:
-                        owner._cond.wait_for(lambda: owner._seq != seen or owner._closed, timeout=period * 5)
-                        if owner._closed:
-                            return
-                        jpeg, seen = owner._jpeg, owner._seq
+                    jpeg, seen = owner._next(seen, period * 5)
+                    if owner._closed:
+                        return
                     if jpeg is None:
                         continue
                     head = b"--%s\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n\r\n" % (
@@ -91,6 +89,12 @@ class MjpegServer:
         self._server.daemon_threads = True
         self._thread = threading.Thread(target=self._server.serve_forever, name="mjpeg", daemon=True)
         self._thread.start()
+
+    def _next(self, seen: int, timeout_s: float) -> tuple[bytes | None, int]:
+        """The newest JPEG once it is newer than seen (or after timeout_s), with its number."""
+        with self._cond:
+            self._cond.wait_for(lambda: self._seq != seen or self._closed, timeout=timeout_s)
+            return self._jpeg, self._seq
 
     @property
     def port(self) -> int:
