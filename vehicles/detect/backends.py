@@ -76,7 +76,7 @@ class CropParams:
 
     crop_px: int = ROI_PX
     crop_side: float = 1.15
-    mask_half_width: float = 0.3
+    mask_half_width: float = 0.25
     min_points_conf: float = 0.2
     min_presence: float = 0.5
 
