@@ -9,6 +9,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 from conftest import LABELS, read_frame
 
 from controller.measurement import fuse_covariances
@@ -18,6 +19,8 @@ from vehicles.detect.calibration import Calibration
 from vehicles.detect.localize import localize
 from vehicles.detect.pixels import CameraDetection
 from vehicles.detect.pose_history import PoseSample
+
+pytestmark = pytest.mark.slow  # tens of seconds of HOG and pose model on real frames
 
 FEET = np.array([2.0, -1.0, 0.0])
 TRUE_CENTRE = FEET + [0.0, 0.0, 0.9]
