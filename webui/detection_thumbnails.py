@@ -19,11 +19,14 @@ from collections.abc import Callable
 import viser
 
 
+IMG_STYLE = "width:100%;display:block"
+
+
 def thumbnail_html(vehicle_id: int, jpeg: bytes | None, caption: str) -> str:
     """The HTML of one MAV's entry: the picture (or a placeholder) and a one-line caption."""
     if jpeg:
         src = "data:image/jpeg;base64," + base64.b64encode(jpeg).decode()
-        img = f'<img class="skyring-thumb" data-vehicle="{vehicle_id}" src="{src}" style="width:100%;display:block">'
+        img = f'<img class="skyring-thumb" data-vehicle="{vehicle_id}" src="{src}" style="{IMG_STYLE}">'
     else:
         img = f'<div class="skyring-thumb-empty" data-vehicle="{vehicle_id}" style="color:#888">no picture yet</div>'
     return (

@@ -91,7 +91,7 @@ def run(repeats: int = 200) -> None:
         detector.close()
     total = sum(pipe_t)
     print(
-        f"detect: default back-end (HOG + MediaPipe pose, LiteRT), frames {SIZE[0]} x {SIZE[1]}, one core each"
+        f"detect: default back-end (HOG + MediaPipe pose on LiteRT), {SIZE[0]} x {SIZE[1]} frames, one core each"
     )
     print(f"  HOG full-frame search        {_ms(hog_t)}")
     print(f"  acquisition (HOG + pose)     {_ms(find_t)}")

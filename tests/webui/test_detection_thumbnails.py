@@ -9,6 +9,7 @@ import pytest
 
 FOOTAGE = Path("/usr/share/doc/opencv-doc/examples/data/vtest.avi")
 SHOTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+IMG = "document.querySelector('img.skyring-thumb')"
 
 
 def _jpeg() -> bytes:
@@ -69,12 +70,9 @@ def test_each_mavs_thumbnail_shows_in_the_page(browser):
         img = page.locator('img.skyring-thumb[data-vehicle="1"]')
         img.wait_for(state="visible", timeout=30_000)
         page.wait_for_function(
-            "() => { const i = document.querySelector('img.skyring-thumb'); return i && i.naturalWidth > 0; }",
-            timeout=30_000,
+            f"() => {{ const i = {IMG}; return i && i.naturalWidth > 0; }}", timeout=30_000
         )
-        size = page.evaluate(
-            "() => { const i = document.querySelector('img.skyring-thumb'); return [i.naturalWidth, i.naturalHeight]; }"
-        )
+        size = page.evaluate(f"() => {{ const i = {IMG}; return [i.naturalWidth, i.naturalHeight]; }}")
         assert size == [320, 240]
         assert page.get_by_text("camera disconnected").is_visible()
         SHOTS.mkdir(exist_ok=True)
@@ -86,8 +84,7 @@ def test_each_mavs_thumbnail_shows_in_the_page(browser):
         thumbs._shown_at.clear()  # the test's own second update, not a flood
         thumbs.update(1, cv2.imencode(".jpg", cv2.resize(black, (320, 100)))[1].tobytes(), "camera stalled")
         page.wait_for_function(
-            "() => { const i = document.querySelector('img.skyring-thumb'); return i && i.naturalHeight === 100; }",
-            timeout=30_000,
+            f"() => {{ const i = {IMG}; return i && i.naturalHeight === 100; }}", timeout=30_000
         )
         assert page.get_by_text("camera stalled").is_visible()
         page.close()
