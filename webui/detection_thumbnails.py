@@ -18,7 +18,6 @@ from collections.abc import Callable
 
 import viser
 
-
 IMG_STYLE = "width:100%;display:block"
 
 
@@ -28,7 +27,7 @@ def thumbnail_html(vehicle_id: int, jpeg: bytes | None, caption: str) -> str:
         src = "data:image/jpeg;base64," + base64.b64encode(jpeg).decode()
         img = f'<img class="skyring-thumb" data-vehicle="{vehicle_id}" src="{src}" style="{IMG_STYLE}">'
     else:
-        img = f'<div class="skyring-thumb-empty" data-vehicle="{vehicle_id}" style="color:#888">no picture yet</div>'
+        img = f'<div class="skyring-thumb-empty" data-vehicle="{vehicle_id}">no picture yet</div>'
     return (
         f'<div style="margin:2px 0 6px 0"><div style="font-size:0.8em"><b>MAV {vehicle_id}</b> '
         f"{html.escape(caption)}</div>{img}</div>"

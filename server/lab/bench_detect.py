@@ -90,9 +90,7 @@ def run(repeats: int = 200) -> None:
     finally:
         detector.close()
     total = sum(pipe_t)
-    print(
-        f"detect: default back-end (HOG + MediaPipe pose on LiteRT), {SIZE[0]} x {SIZE[1]} frames, one core each"
-    )
+    print(f"detect: default back-end (HOG + MediaPipe pose), {SIZE[0]} x {SIZE[1]} frames, one core each")
     print(f"  HOG full-frame search        {_ms(hog_t)}")
     print(f"  acquisition (HOG + pose)     {_ms(find_t)}")
     if refine_t:
