@@ -88,4 +88,4 @@ def test_write_calibration_gives_an_opencv_yaml_template(tmp_path):
     proc = _skyring("detect", "--write-calibration", str(path), timeout=60)
     assert proc.returncode == 0, proc.stderr
     text = path.read_text()
-    assert text.startswith("%YAML:1.0") and "camera_to_body_rotation" in text and "1.47033" in text  # fx
+    assert text.startswith("%YAML:1.0") and "camera_to_body_rotation" in text and "1470.3" in text  # fx
