@@ -9,7 +9,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import numpy as np
 import pytest
-from conftest import footage
+from detect_footage import footage
 
 from vehicles.detect.camera_source import (
     CameraReader,

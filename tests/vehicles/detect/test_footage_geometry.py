@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import LABELS, read_frame
+from detect_footage import LABELS, read_frame
 
 from controller.measurement import fuse_covariances
 from vehicles.camera import CameraParams, camera_pose, project

@@ -12,7 +12,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import LABELS, read_frame
+from detect_footage import LABELS, read_frame
 
 from vehicles.detect.backends import HogPoseDetector
 from vehicles.detect.hog import HogParams

@@ -7,7 +7,7 @@ import signal
 
 import numpy as np
 import pytest
-from conftest import read_frame
+from detect_footage import read_frame
 
 from vehicles.detect.backends import CropParams, make_crop
 from vehicles.detect.pose import ROI_PX, MediaPipePose, PoseWorkerError, head_and_feet, pose_python
