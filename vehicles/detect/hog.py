@@ -78,7 +78,7 @@ class HogPeople:
         self._cv2 = cv2
         self._p = params or HogParams()
         self._hog = cv2.HOGDescriptor()
-        self._hog.setSVMDetector(cv2.HOGDescriptor_getDefaultPeopleDetector())
+        self._hog.setSVMDetector(np.asarray(cv2.HOGDescriptor.getDefaultPeopleDetector(), dtype=np.float32))
 
     @property
     def params(self) -> HogParams:

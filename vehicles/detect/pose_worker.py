@@ -57,7 +57,7 @@ class RoiLandmarks:
     """MediaPipe's pose landmark model on a 256 x 256 crop, through LiteRT."""
 
     def __init__(self, model_path: str) -> None:
-        from ai_edge_litert.interpreter import Interpreter
+        from ai_edge_litert.interpreter import Interpreter  # pyright: ignore[reportMissingImports]
 
         self._it = Interpreter(model_path=model_path, num_threads=1)
         self._it.allocate_tensors()
@@ -78,12 +78,12 @@ class RoiLandmarks:
 
 
 def main() -> int:
-    import mediapipe as mp
+    import mediapipe as mp  # pyright: ignore[reportMissingImports]
     import numpy as np
 
     inp, out = sys.stdin.buffer, sys.stdout.buffer
     model = os.path.join(
-        os.path.dirname(mp.__file__), "modules", "pose_landmark", "pose_landmark_full.tflite"
+        os.path.dirname(str(mp.__file__)), "modules", "pose_landmark", "pose_landmark_full.tflite"
     )
     roi = RoiLandmarks(model)
     full = mp.solutions.pose.Pose(

@@ -82,7 +82,7 @@ class MjpegServer:
                     except OSError:
                         return
 
-            def log_message(self, *args: object) -> None:
+            def log_message(self, format: str, *args: object) -> None:  # noqa: A002 - http.server's name
                 return None
 
         self._server = ThreadingHTTPServer((host, port), Handler)

@@ -120,7 +120,7 @@ class _Camera:
                     i += 1
                     time.sleep(0.05)
 
-            def log_message(self, *args: object) -> None:
+            def log_message(self, format: str, *args: object) -> None:  # noqa: A002 - http.server's name
                 return None
 
         self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)

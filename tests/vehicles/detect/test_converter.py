@@ -34,7 +34,9 @@ def _seen(t: float, vid: int = 1) -> CameraDetection:
     s = _state(t, vid)
     pose = camera_pose(body_position_m=s.position_m, yaw_rad=s.yaw_rad)
     px, _ = project(np.stack([FEET + [0, 0, 1.75], FEET]), pose)
-    person = PersonPixels(head_px=px[0], feet_px=px[1], head_conf=0.9, feet_conf=0.8, box_px=[0, 0, 1, 1])
+    person = PersonPixels(
+        head_px=px[0], feet_px=px[1], head_conf=0.9, feet_conf=0.8, box_px=np.array([0.0, 0.0, 1.0, 1.0])
+    )
     return CameraDetection(
         vehicle_id=vid, stamp_s=t, frame_seq=int(t * 10), image_size_px=(2040, 1086), person=person
     )

@@ -26,7 +26,11 @@ def _pixels(body=BODY, yaw=0.1, pitch=0.05, roll=-0.03, feet=FEET, height=1.75) 
 
 def _det(px: np.ndarray, head_conf=1.0, feet_conf=1.0, size=(2040, 1086)) -> CameraDetection:
     person = PersonPixels(
-        head_px=px[0], feet_px=px[1], head_conf=head_conf, feet_conf=feet_conf, box_px=[0, 0, 1, 1]
+        head_px=px[0],
+        feet_px=px[1],
+        head_conf=head_conf,
+        feet_conf=feet_conf,
+        box_px=np.array([0.0, 0.0, 1.0, 1.0]),
     )
     return CameraDetection(vehicle_id=2, stamp_s=5.0, frame_seq=7, image_size_px=size, person=person)
 
