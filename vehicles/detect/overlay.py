@@ -55,14 +55,21 @@ def draw_overlay(
     return out
 
 
-def thumbnail_jpeg(image_bgr: np.ndarray, *, width_px: int = 320, quality: int = 70) -> bytes:
-    """A small JPEG of image_bgr, width_px wide, for the operator page."""
+def thumbnail_jpeg(
+    image_bgr: np.ndarray, *, width_px: int = 320, quality: int = 70, max_bytes: int = 12_000
+) -> bytes:
+    """A small JPEG of image_bgr, width_px wide, for the operator page: at `quality`, lowered in steps of 10
+    (to 20 at least) until it fits max_bytes (it travels in one network message)."""
     import cv2
 
     h, w = image_bgr.shape[:2]
     k = width_px / float(w)
     small = cv2.resize(image_bgr, (width_px, max(int(round(h * k)), 1)), interpolation=cv2.INTER_AREA)
-    ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        raise ValueError("JPEG encoding failed")
-    return buf.tobytes()
+    q = int(quality)
+    while True:
+        ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, q])
+        if not ok:
+            raise ValueError("JPEG encoding failed")
+        if buf.size <= max_bytes or q <= 20:
+            return buf.tobytes()
+        q -= 10
