@@ -44,9 +44,7 @@ class NetConfig:
         check_team(self.team)
         for endpoint in (*self.connect, *self.listen):
             if not endpoint.startswith(_SCHEMES) or ":" not in endpoint:
-                raise ValueError(
-                    f"{endpoint!r} is not a Zenoh endpoint; expected e.g. tcp/192.168.1.10:7447"
-                )
+                raise ValueError(f"{endpoint!r} is not a Zenoh endpoint; expected e.g. tcp/192.168.1.10:7447")
         if self.config_file is not None and not Path(self.config_file).is_file():
             raise ValueError(f"Zenoh configuration file {self.config_file} does not exist")
 

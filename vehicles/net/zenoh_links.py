@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections import deque
+from dataclasses import dataclass
 
 from controller.messages import Detection, HorizonPlan
 from vehicles.links import Message
@@ -21,6 +22,15 @@ from vehicles.net.keys import agent_key, all_agents_key
 from vehicles.net.session import Bus
 
 QUEUE_LIMIT = 1024
+
+
+@dataclass(frozen=True, eq=False)
+class Heard:
+    """A teammate's last plan: when it arrived (receiver's UTC), the teammate's phase, the plan."""
+
+    received_s: float
+    phase: str
+    plan: HorizonPlan
 
 
 class ZenohLinks:
@@ -33,7 +43,7 @@ class ZenohLinks:
         self._lock = threading.Lock()
         self._received: deque[Message] = deque()
         self._own: deque[Detection] = deque()
-        self._plan_phase: dict[int, tuple[float, str, bool]] = {}  # id -> (received UTC, phase, in_formation)
+        self._heard: dict[int, Heard] = {}
         self._limit = queue_limit
         self.sent_plans = 0
         self.skipped_detections = 0
@@ -65,10 +75,10 @@ class ZenohLinks:
             self._own.clear()
         return out
 
-    def heard(self) -> dict[int, tuple[float, str, bool]]:
-        """Teammates heard: id -> (when their last plan arrived, UTC; their phase; in formation)."""
+    def heard(self) -> dict[int, Heard]:
+        """Every teammate heard so far, by id, with its last plan."""
         with self._lock:
-            return dict(self._plan_phase)
+            return dict(self._heard)
 
     def _on_plan(self, msg: Received) -> None:
         sender = msg.header.sender
@@ -81,7 +91,7 @@ class ZenohLinks:
             self._bus.guard.count(Reason.INVALID)
             return
         with self._lock:
-            self._plan_phase[sender] = (msg.received_s, msg.body.phase, msg.body.in_formation)
+            self._heard[sender] = Heard(received_s=msg.received_s, phase=msg.body.phase, plan=plan)
             self._push(self._received, plan)
 
     def _on_detection(self, msg: Received) -> None:
