@@ -188,6 +188,14 @@ def serve(
     if agents != "in-process":
         from server.cli.agent import net_config
         from server.cli.serve_agents import run_agents
+        from vehicles.px4.autopilot import sitl_urls
+
+        if px4_sitl and px4:
+            raise typer.BadParameter(
+                "give either --px4 URL ... or --px4-sitl N, not both", param_hint="--px4"
+            )
+        if px4_sitl:
+            px4 = sitl_urls(px4_sitl)
 
         run_agents(
             mode=agents,
