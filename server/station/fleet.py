@@ -29,8 +29,6 @@ from collections import OrderedDict, deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
-import numpy as np
-
 from controller.messages import Obstacle, SolveStatus
 from controller.params import ControllerParams, FormationParams
 from controller.tracker import TrackerStats
@@ -53,8 +51,7 @@ PENDING, ACKED, REFUSED, FAILED = "pending", "acked", "refused", "failed"
 class FleetParams:
     """lost_after_s: no state for this long shows an agent lost; heartbeat_hz: station heartbeats per
     second; resend_s / command_timeout_s: command re-sending and giving up; service_hz: the service loop's
-    rate; commands_shown: recent commands kept per vehicle; skew_limit_s: clock offsets beyond this are
-    flagged on the vehicle's card."""
+    rate; commands_shown: recent commands shown per vehicle."""
 
     lost_after_s: float = 0.5
     heartbeat_hz: float = 2.0
@@ -62,7 +59,6 @@ class FleetParams:
     command_timeout_s: float = 3.0
     service_hz: float = 20.0
     commands_shown: int = 6
-    skew_limit_s: float = 0.05
 
 
 @dataclass
@@ -129,6 +125,7 @@ class AgentFleet:
         self._next_command = 1
         self._rejected_actions = 0
         self.override_landings = 0
+        self.bad_reports = 0
         self._now = clock()
         self._next_heartbeat = -math.inf
         self._stop = threading.Event()
@@ -437,27 +434,32 @@ class AgentFleet:
                 counters=AgentCounters(),
                 agent=link,
             )
-        autopilot = _convert(lambda: wire.telemetry_from_wire(s.autopilot, vehicle_id=vid), s.autopilot)
-        if autopilot is not None and lost:
-            autopilot = replace(autopilot, link_lost=True)
-        setpoint = None
-        if s.setpoint is not None and s.setpoint_yaw_rad is not None:
-            setpoint = _convert(
-                lambda: Setpoint(
+        autopilot = plan = person = setpoint = None
+        try:
+            if s.autopilot is not None:
+                autopilot = wire.telemetry_from_wire(s.autopilot, vehicle_id=vid)
+                if lost:
+                    autopilot = replace(autopilot, link_lost=True)
+            if s.plan is not None:
+                plan = wire.plan_from_wire(s.plan, vehicle_id=vid)
+            if s.person is not None:
+                person = wire.person_from_wire(s.person)
+            if s.setpoint is not None and s.setpoint_yaw_rad is not None:
+                setpoint = Setpoint(
                     stamp_s=utc,
                     position_m=s.setpoint,
                     velocity_mps=(0.0, 0.0, 0.0),
                     yaw_rad=s.setpoint_yaw_rad,
-                ),
-                s.setpoint,
-            )
+                )
+        except (ValueError, TypeError):
+            self.bad_reports += 1  # an agent reported values its own types refuse: shown as unknown
         agent_now = utc + (offset or 0.0)
         return VehicleSnapshot(
             vehicle_id=vid,
             phase=_phase(s),
             autopilot=autopilot,
-            plan=_convert(lambda: wire.plan_from_wire(s.plan, vehicle_id=vid), s.plan),
-            person=_convert(lambda: wire.person_from_wire(s.person), s.person),
+            plan=plan,
+            person=person,
             setpoint=setpoint,
             status=_status(s.status),
             solver_time_s=s.solver_time_s,
@@ -494,28 +496,3 @@ def _status(value: str | None) -> SolveStatus | None:
 def _known(counts: dict[str, int], kind: type) -> dict[str, int]:
     names = kind.__dataclass_fields__
     return {k: int(v) for k, v in counts.items() if k in names}
-
-
-def _convert(make, value):
-    """make() when value is not None; None when the domain type refuses it (a bad agent report)."""
-    if value is None:
-        return None
-    try:
-        return make()
-    except (ValueError, TypeError):
-        return None
-
-
-def skew_flag(link: AgentLink, *, limit_s: float = FleetParams.skew_limit_s) -> bool:
-    """The agent's clock is off the station's by more than limit_s."""
-    return link.clock_offset_s is not None and abs(link.clock_offset_s) > limit_s
-
-
-def worst_tick_error_s(vehicles: Sequence[VehicleSnapshot]) -> float | None:
-    """The largest reported tick-period p99 error over the agents (tests and benches)."""
-    values = [
-        v.agent.tick_period_p99_error_s
-        for v in vehicles
-        if v.agent is not None and v.agent.tick_period_p99_error_s is not None
-    ]
-    return float(np.max(values)) if values else None
