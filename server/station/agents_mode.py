@@ -35,6 +35,8 @@ from vehicles.sim.trees import TreeSpec
 log = logging.getLogger(__name__)
 
 STATION_RATE_HZ = 20.0  # the station's tick: snapshots for the page, the API and the log
+# The station's time runs from 0 at one control period per tick, paced at real time by the live runner (as
+# with PX4 vehicles); the agents' own stamps are UTC.
 
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:
@@ -106,7 +108,7 @@ def build_zenoh_station(
     except BaseException:
         bus.close()
         raise
-    station = GroundStation(mission=fleet, control_period_s=1.0 / STATION_RATE_HZ, clock=time.monotonic)
+    station = GroundStation(mission=fleet, control_period_s=1.0 / STATION_RATE_HZ)
     fleet.start()
     return AgentsStation(station=station, fleet=fleet, bus=bus)
 
@@ -181,7 +183,6 @@ def build_spawn_station(
         station = GroundStation(
             mission=fleet,
             control_period_s=1.0 / STATION_RATE_HZ,
-            clock=time.monotonic,
             camera=camera_view(setup.world.camera),
         )
         world.start()
