@@ -351,7 +351,7 @@ class AgentFleet:
             and cmd.settings is not None
             and cmd.settings.rev == self._settings.rev
             for vid, (status, _) in cmd.outcome.items()
-            if status in (PENDING, ACKED)
+            if status in (PENDING, ACKED, REFUSED)  # a refusal is shown, not re-sent; a failure is retried
         }
         missing = tuple(vid for vid in behind if vid not in configuring)
         if missing:
