@@ -116,9 +116,9 @@ def test_forged_malformed_oversized_and_replayed_messages_are_counted_and_the_lo
     assert agent.loop_errors == 0
     assert agent.tick_stats.ticks >= 0.8 * 20.0 * ran  # it kept its rate (generous for a shared machine)
     p99 = agent.tick_stats.p99_error_s()
-    assert (
-        p99 is not None and p99 < 0.05
-    )  # below one period at p99; the figure itself is in `skyring bench links`
+    # Bad traffic costs the loop nothing it would notice: p99 below one period (20 Hz); `skyring bench agents`
+    # measures the figure.
+    assert p99 is not None and p99 < 0.05
 
 
 def command(command_id: int, action: str, *, settings=None) -> wire.CommandBody:
