@@ -78,7 +78,7 @@ def spawned() -> Iterator[Spawned]:
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
     try:
-        assert ready.wait(30.0) and "error" not in box, box.get("error")
+        assert ready.wait(90.0) and "error" not in box, box.get("error")  # imports are slow on a busy machine
         yield Spawned(agents=agents, urls=box["urls"], ui=box["ui"], started=time.monotonic())
     finally:
         loop.call_soon_threadsafe(stop.set)
