@@ -58,6 +58,18 @@ def detect(
     write_calibration: Annotated[
         Path | None, typer.Option(help="write the calibration in use (a template to edit) and exit")
     ] = None,
+    zenoh: Annotated[bool, typer.Option(help="publish to the MAV's agent and the station over Zenoh")] = True,
+    team: Annotated[
+        str, typer.Option(help="team name (the Zenoh key prefix skyring/<team>/...)")
+    ] = "skyring",
+    connect: Annotated[
+        list[str] | None, typer.Option(help="Zenoh endpoint to connect to (repeatable)")
+    ] = None,
+    listen: Annotated[list[str] | None, typer.Option(help="Zenoh endpoint to listen on (repeatable)")] = None,
+    zenoh_config: Annotated[
+        Path | None, typer.Option(help="Zenoh JSON5 config (TLS/mTLS, access control)")
+    ] = None,
+    multicast: Annotated[bool, typer.Option(help="find peers by multicast scouting")] = True,
 ) -> None:
     """Detect the person in one MAV's camera and send head/feet detections to its agent."""
     from vehicles.detect.calibration import Calibration, CalibrationError
@@ -107,6 +119,17 @@ def detect(
         ),
     )
     sinks: list[DetectionSink] = []
+    if zenoh:
+        from server.cli.agent import net_config
+        from vehicles.net.camera_publisher import ZenohCameraSink
+
+        try:
+            config = net_config(
+                team=team, connect=connect, listen=listen, zenoh_config=zenoh_config, multicast=multicast
+            )
+        except typer.BadParameter as exc:
+            _fail(f"invalid Zenoh option: {exc.message}")
+        sinks.append(ZenohCameraSink(config, vehicle_id=vehicle_id))
     if out:
         sinks.append(JsonlSink(sys.stdout) if out == "-" else JsonlSink.to_path(out))
     writer = PreviewWriter(preview) if preview is not None else None
@@ -122,7 +145,8 @@ def detect(
         log=lambda msg: typer.echo(msg, err=True),
     )
     signal.signal(signal.SIGTERM, lambda *_: runner.stop())
-    typer.echo(f"skyring detect: MAV {vehicle_id}, {spec.label}, back-end {detector.name}", err=True)
+    where = f", Zenoh team {team}" if zenoh else ""
+    typer.echo(f"skyring detect: MAV {vehicle_id}, {spec.label}, back-end {detector.name}{where}", err=True)
     if mjpeg is not None:
         typer.echo(f"preview: http://{preview_host}:{mjpeg.port}/", err=True)
     reader.start()
