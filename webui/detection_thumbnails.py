@@ -1,7 +1,7 @@
 """Each MAV's latest detection thumbnail in the operator page, about once a second, with its camera's state.
 
-A separate, small piece of the page: a "Cameras" folder with one entry per MAV (in vehicle order, next to
-the vehicle cards), fed by whoever receives the `skyring detect` reports (the ground station). The JPEG that
+A separate, small piece of the page: a "Cameras" folder (made when the first report arrives) with one entry
+per MAV (in vehicle order, next to the vehicle cards), fed by whoever receives the `skyring detect` reports (the ground station). The JPEG that
 `skyring detect` made (overlay drawn, 320 px wide) is shown as it is, in an <img> with a data URI: no
 decoding here, no request back to the MAV. Updates faster than `min_period_s` per MAV are dropped, so a
 flood of reports cannot load the page. A MAV whose reports stop shows how old its picture is.
@@ -48,7 +48,7 @@ class DetectionThumbnails:
         self._min_period_s = float(min_period_s)
         self._clock = clock
         self._lock = threading.Lock()
-        self._folder = server.gui.add_folder("Cameras", expand_by_default=True)
+        self._folder: viser.GuiFolderHandle | None = None  # made with the first picture: no empty folder
         self._entries: dict[int, viser.GuiHtmlHandle] = {}
         self._shown_at: dict[int, float] = {}
         self.dropped = 0
@@ -64,6 +64,8 @@ class DetectionThumbnails:
             self._shown_at[vehicle_id] = now
             content = thumbnail_html(vehicle_id, jpeg, caption)
             handle = self._entries.get(vehicle_id)
+            if self._folder is None:
+                self._folder = self._server.gui.add_folder("Cameras", expand_by_default=True)
             if handle is None:
                 with self._folder:
                     self._entries[vehicle_id] = self._server.gui.add_html(content, order=float(vehicle_id))
