@@ -1,10 +1,11 @@
 """Each MAV's latest detection thumbnail in the operator page, about once a second, with its camera's state.
 
 A separate, small piece of the page: a "Cameras" folder (made when the first report arrives) with one entry
-per MAV (in vehicle order, next to the vehicle cards), fed by whoever receives the `skyring detect` reports (the ground station). The JPEG that
-`skyring detect` made (overlay drawn, 320 px wide) is shown as it is, in an <img> with a data URI: no
-decoding here, no request back to the MAV. Updates faster than `min_period_s` per MAV are dropped, so a
-flood of reports cannot load the page. A MAV whose reports stop shows how old its picture is.
+per MAV (in vehicle order, next to the vehicle cards), fed by whoever receives the `skyring detect` reports
+(the ground station). The JPEG that `skyring detect` made (overlay drawn, 320 px wide) is shown as it is, in
+an <img> with a data URI: no decoding here, no request back to the MAV. Updates faster than `min_period_s`
+per MAV are dropped, so a flood of reports cannot load the page. `mark_stale` (called about once a second)
+flags a MAV whose reports stopped (its detector process died, or its link did) with the picture's age.
 """
 
 from __future__ import annotations
@@ -51,6 +52,8 @@ class DetectionThumbnails:
         self._folder: viser.GuiFolderHandle | None = None  # made with the first picture: no empty folder
         self._entries: dict[int, viser.GuiHtmlHandle] = {}
         self._shown_at: dict[int, float] = {}
+        self._shown: dict[int, tuple[bytes | None, str]] = {}
+        self._stale: set[int] = set()
         self.dropped = 0
 
     def update(self, vehicle_id: int, jpeg: bytes | None, caption: str) -> bool:
@@ -62,6 +65,8 @@ class DetectionThumbnails:
                 self.dropped += 1
                 return False
             self._shown_at[vehicle_id] = now
+            self._shown[vehicle_id] = (jpeg, caption)
+            self._stale.discard(vehicle_id)
             content = thumbnail_html(vehicle_id, jpeg, caption)
             handle = self._entries.get(vehicle_id)
             if self._folder is None:
@@ -73,9 +78,26 @@ class DetectionThumbnails:
                 handle.content = content
         return True
 
+    def mark_stale(self, *, max_age_s: float = 3.0) -> list[int]:
+        """Flag every MAV whose last picture is older than max_age_s ("NO REPORT for N s"); returns them."""
+        now = self._clock()
+        flagged = []
+        with self._lock:
+            for vid, shown_at in self._shown_at.items():
+                age = now - shown_at
+                handle = self._entries.get(vid)
+                if age <= max_age_s or handle is None:
+                    continue
+                jpeg, caption = self._shown[vid]
+                handle.content = thumbnail_html(vid, jpeg, f"NO REPORT for {age:.0f} s (last: {caption})")
+                self._stale.add(vid)
+                flagged.append(vid)
+        return flagged
+
     def remove(self, vehicle_id: int) -> None:
         with self._lock:
             handle = self._entries.pop(vehicle_id, None)
             self._shown_at.pop(vehicle_id, None)
+            self._shown.pop(vehicle_id, None)
         if handle is not None:
             handle.remove()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import viser
 
 from vehicles.net import wire
@@ -19,9 +21,19 @@ def caption(body: wire.CameraReportBody) -> str:
     return text
 
 
-def show_camera_reports(bus: Bus, server: viser.ViserServer) -> DetectionThumbnails:
-    """Subscribe to every MAV's camera report and keep its thumbnail in the operator page (1 Hz at most)."""
+def show_camera_reports(
+    bus: Bus, server: viser.ViserServer, *, stale_after_s: float = 3.0
+) -> DetectionThumbnails:
+    """Subscribe to every MAV's camera report and keep its thumbnail in the operator page (1 Hz at most); a
+    daemon thread flags, once a second, the MAVs whose reports stopped for stale_after_s."""
     thumbs = DetectionThumbnails(server)
+
+    def watch() -> None:
+        while not stop.wait(1.0):
+            thumbs.mark_stale(max_age_s=stale_after_s)
+
+    stop = threading.Event()
+    threading.Thread(target=watch, name="camera-reports", daemon=True).start()
 
     def on_report(msg: Received) -> None:
         body = msg.body

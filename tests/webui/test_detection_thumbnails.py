@@ -46,6 +46,29 @@ def test_updates_faster_than_once_a_second_are_dropped():
         server.stop()
 
 
+def test_a_mav_whose_reports_stop_is_flagged_with_the_age_of_its_picture():
+    import viser
+
+    from webui.detection_thumbnails import DetectionThumbnails
+
+    now = [0.0]
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        thumbs = DetectionThumbnails(server, clock=lambda: now[0])
+        thumbs.update(1, b"\xff\xd8", "camera streaming")
+        thumbs.update(2, b"\xff\xd8", "camera streaming")
+        now[0] = 2.0
+        thumbs.update(2, b"\xff\xd8", "camera streaming")
+        now[0] = 4.5
+        assert thumbs.mark_stale(max_age_s=3.0) == [1]
+        assert "NO REPORT for 4 s" in thumbs._entries[1].content
+        assert "NO REPORT" not in thumbs._entries[2].content
+        thumbs.update(1, b"\xff\xd8", "camera streaming")  # it is back
+        assert "NO REPORT" not in thumbs._entries[1].content
+    finally:
+        server.stop()
+
+
 def test_caption_is_escaped():
     from webui.detection_thumbnails import thumbnail_html
 
