@@ -16,7 +16,7 @@ def test_thumbnail_is_320_px_wide_and_fits_one_message_even_for_noise():
     jpeg = thumbnail_jpeg(noise, max_bytes=12_000)
     assert len(jpeg) <= 12_000
     image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
-    assert image.shape == (170, 320, 3)
+    assert image is not None and image.shape == (170, 320, 3)
 
 
 def test_overlay_marks_head_and_feet_and_leaves_the_frame_alone():
