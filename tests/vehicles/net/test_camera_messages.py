@@ -88,12 +88,10 @@ def test_a_camera_report_with_its_thumbnail_fits_one_message():
     payload = wire.encode(team=TEAM, sender=2, boot=1, seq=1, stamp=1.0, body=body)
     assert len(payload) <= wire.MAX_MESSAGE_BYTES
     got = _guard().admit(agent_key(TEAM, 2, "camera_report"), payload)
-    assert got is not None and got.body.thumbnail_jpeg == jpeg
-    assert (
-        got.body.state == "stalled"
-        and got.body.frame_age_s is None
-        and got.body.message == "no frame for 1.2 s"
-    )
+    assert got is not None and isinstance(got.body, wire.CameraReportBody)
+    report = got.body
+    assert report.thumbnail_jpeg == jpeg
+    assert report.state == "stalled" and report.frame_age_s is None and report.message == "no frame for 1.2 s"
 
 
 def test_a_thumbnail_too_large_for_a_message_is_left_out_not_sent_oversized():
