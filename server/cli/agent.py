@@ -18,7 +18,7 @@ import signal
 import threading
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -135,7 +135,7 @@ def agent(
         )
     except CalibrationError as exc:
         raise typer.BadParameter(str(exc), param_hint="--calibration") from None
-    options = dict(
+    options: dict[str, Any] = dict(
         vehicle_id=vehicle_id,
         team_size=team_size,
         config=config,
