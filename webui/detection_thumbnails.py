@@ -54,11 +54,14 @@ class DetectionThumbnails:
         self._shown_at: dict[int, float] = {}
         self._shown: dict[int, tuple[bytes | None, str]] = {}
         self._stale: set[int] = set()
+        self.closed = threading.Event()
         self.dropped = 0
 
     def update(self, vehicle_id: int, jpeg: bytes | None, caption: str) -> bool:
         """Show vehicle_id's latest picture and caption; False when dropped (too soon after the last)."""
         now = self._clock()
+        if self.closed.is_set():
+            return False
         with self._lock:
             last = self._shown_at.get(vehicle_id, -math.inf)
             if now - last < self._min_period_s:
@@ -81,7 +84,9 @@ class DetectionThumbnails:
     def mark_stale(self, *, max_age_s: float = 3.0) -> list[int]:
         """Flag every MAV whose last picture is older than max_age_s ("NO REPORT for N s"); returns them."""
         now = self._clock()
-        flagged = []
+        flagged: list[int] = []
+        if self.closed.is_set():
+            return flagged
         with self._lock:
             for vid, shown_at in self._shown_at.items():
                 age = now - shown_at
@@ -93,6 +98,10 @@ class DetectionThumbnails:
                 self._stale.add(vid)
                 flagged.append(vid)
         return flagged
+
+    def close(self) -> None:
+        """Stop touching the page (before its server stops)."""
+        self.closed.set()
 
     def remove(self, vehicle_id: int) -> None:
         with self._lock:

@@ -25,14 +25,14 @@ def show_camera_reports(
     bus: Bus, server: viser.ViserServer, *, stale_after_s: float = 3.0
 ) -> DetectionThumbnails:
     """Subscribe to every MAV's camera report and keep its thumbnail in the operator page (1 Hz at most); a
-    daemon thread flags, once a second, the MAVs whose reports stopped for stale_after_s."""
+    daemon thread flags, once a second, the MAVs whose reports stopped for stale_after_s (until
+    `thumbs.close()`)."""
     thumbs = DetectionThumbnails(server)
 
     def watch() -> None:
-        while not stop.wait(1.0):
+        while not thumbs.closed.wait(1.0):
             thumbs.mark_stale(max_age_s=stale_after_s)
 
-    stop = threading.Event()
     threading.Thread(target=watch, name="camera-reports", daemon=True).start()
 
     def on_report(msg: Received) -> None:

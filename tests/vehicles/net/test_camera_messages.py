@@ -120,6 +120,7 @@ def test_camera_messages_reach_the_agents_links_and_the_stations_page_over_zenoh
                       is_member=lambda s: 0 <= s <= 3)  # fmt: skip
     sink = ZenohCameraSink(NetConfig(team=team, connect=(endpoint,), multicast_scouting=False), vehicle_id=2)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    thumbs = None
     try:
         links = ZenohLinks(agent_bus, vehicle_id=2)
         thumbs = show_camera_reports(station_bus, server)
@@ -133,6 +134,8 @@ def test_camera_messages_reach_the_agents_links_and_the_stations_page_over_zenoh
         assert got and got[0].vehicle_id == 2 and np.array_equal(got[0].person.head_px, [100.5, 40.25])
         assert 2 in thumbs._entries and "camera stalled" in thumbs._entries[2].content
     finally:
+        if thumbs is not None:
+            thumbs.close()
         server.stop()
         sink.close()
         station_bus.close()
