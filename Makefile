@@ -24,7 +24,7 @@ $(POSE_STAMP): $(POSE_REQS)
 	rm -rf $(POSE_VENV)
 	$(POSE_PYTHON) -m venv $(POSE_VENV)
 	$(POSE_VENV)/bin/python -m pip install -q --no-deps -r $(POSE_REQS)
-	$(POSE_VENV)/bin/python -c "import mediapipe as mp; mp.solutions.pose.Pose"
+	$(POSE_VENV)/bin/python -c "import mediapipe as mp; mp.solutions.pose.Pose; from ai_edge_litert.interpreter import Interpreter"
 	touch $(POSE_STAMP)
 
 pose-env: $(POSE_STAMP)
