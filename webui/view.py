@@ -22,6 +22,38 @@ from controller.params import FormationParams
 from webui.arrays import Age, Cov6, Points3, Real, Vec2, Vec3
 
 
+@dataclass(frozen=True)
+class CommandOutcome:
+    """One operator command as one vehicle's agent answered it: action "configure", "land" or "release";
+    outcome "pending", "acked", "refused" (message says why) or "failed" (timed out)."""
+
+    command_id: int
+    action: str
+    outcome: str
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class AgentView:
+    """How the station hears a vehicle's onboard agent over the network (None for in-process agents).
+
+    lost: nothing heard for longer than the station's limit; age_s: since its last state; clock_offset_s:
+    agent clock minus station clock (None before a measurement); clock_skew: beyond the station's limit
+    (50 ms); tick_period_p99_error_s: the agent's control-tick jitter; station_lost: the agent no longer hears
+    the station; rejected_messages: network messages it refused; commands: recent operator commands and
+    how the agent answered them, newest last.
+    """
+
+    lost: bool
+    age_s: float
+    clock_offset_s: float | None = None
+    clock_skew: bool = False
+    tick_period_p99_error_s: float | None = None
+    station_lost: bool = False
+    rejected_messages: int = 0
+    commands: tuple[CommandOutcome, ...] = ()
+
+
 @dataclass(frozen=True, eq=False)
 class VehicleView:
     """One MAV as the operator sees it.
@@ -31,7 +63,7 @@ class VehicleView:
     (e.g. "formation", "landing", "landed");
     mode: the autopilot flight mode name; link_age_s: seconds since its last telemetry (stale when
     `link_stale`); solver_time_s: OSQP's time of the last solve (None before the first); battery_fraction in
-    [0, 1] or None when unknown.
+    [0, 1] or None when unknown; agent: its onboard agent's link (None when the agent runs in the station).
     """
 
     vehicle_id: int
@@ -49,6 +81,7 @@ class VehicleView:
     solver_time_s: float | None = None
     battery_fraction: float | None = None
     plan_positions_m: Points3 = field(default_factory=lambda: np.zeros((0, 3)))
+    agent: AgentView | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position_m", frozen_array(self.position_m, (3,), "position_m"))

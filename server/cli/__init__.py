@@ -33,6 +33,8 @@ COMMANDS: dict[str, str] = {
     "experiment": "server.cli.experiment:experiment",
     "replay": "server.cli.replay:replay",
     "users": "server.cli.users:users",
+    "agent": "server.cli.agent:agent",
+    "detect": "server.cli.detect:detect",
 }
 
 
