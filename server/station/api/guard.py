@@ -1,9 +1,10 @@
 """The ASGI middleware in front of every request: body limit, Host and Origin checks, security headers.
 
-- Request bodies are capped at `MAX_BODY_BYTES` (64 KiB; the largest real request is well under 1 KiB): a
-  declared Content-Length above it is answered 413 without reading a byte, and a body streamed without a
-  length is read only up to the cap, then answered 413. The process never holds more than the cap per
-  request (`tests/server/station/test_body_limit.py` measures it).
+- Request bodies are capped at `MAX_BODY_BYTES` (64 KiB; the largest real request is well under 1 KiB):
+  anything beyond it is answered 413 and never reaches the app. The process never holds more than the cap
+  per request (`tests/server/station/test_body_limit.py` measures it): the rest of an oversized body (up
+  to `DRAIN_LIMIT_BYTES`) is read and dropped so the client, which sends it all before reading, gets the
+  answer; a longer declared body is answered at once and its connection closed.
 - In open mode a Host that is not this machine is refused (400); a state-changing request (POST, PUT,
   PATCH, DELETE) from a foreign origin is refused (403) and audited.
 - Every HTTP response carries Content-Security-Policy (with frame-ancestors 'self': only the station's own
@@ -22,6 +23,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from server.station.api.gate import Gate
 
 MAX_BODY_BYTES = 64 * 1024
+DRAIN_LIMIT_BYTES = 32 * 1024 * 1024  # an oversized body up to this is read (and dropped) before the 413
 MUTATING = {"POST", "PUT", "PATCH", "DELETE"}
 
 CSP_DEFAULT = (
@@ -100,7 +102,7 @@ class Guard:
                 await _problem(send, 400, "Content-Length is not a number")
                 return
             if too_big:
-                await self._too_large(receive, send)
+                await self._too_large(receive, send, received=0, more=int(declared) <= DRAIN_LIMIT_BYTES)
                 return
         if method in MUTATING or declared is not None or "transfer-encoding" in headers:
             body = bytearray()
@@ -112,13 +114,22 @@ class Guard:
                 body += message.get("body", b"")
                 more = message.get("more_body", False)
                 if len(body) > self.max_body_bytes:
-                    await self._too_large(receive, send)
+                    await self._too_large(receive, send, received=len(body), more=more)
                     return
             await self.app(scope, _replay(bytes(body), receive), send)
             return
         await self.app(scope, receive, send)
 
-    async def _too_large(self, receive: Receive, send: Send) -> None:
+    async def _too_large(self, receive: Receive, send: Send, *, received: int, more: bool) -> None:
+        """Answer 413. The rest of a body up to DRAIN_LIMIT_BYTES is read and thrown away first (never held):
+        a client sends its whole body before it reads the answer, and closing on unread data would reset
+        the connection and lose the answer. A longer body is answered at once and its connection closed."""
+        while more and received <= DRAIN_LIMIT_BYTES:
+            message = await receive()
+            if message["type"] == "http.disconnect":
+                return
+            received += len(message.get("body", b""))
+            more = message.get("more_body", False)
         await _problem(
             send,
             413,

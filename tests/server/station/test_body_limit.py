@@ -1,5 +1,6 @@
-"""Request bodies are capped at 64 KiB: a 20 MB body gets 413 and the station process does not grow by more
-than 50 MB (measured on a real `skyring serve` process, with and without a declared length)."""
+"""Request bodies are capped at 64 KiB: a 20 MB body gets 413 (the client receives it) and the station process
+does not grow by more than 50 MB (measured on a real `skyring serve` process, with and without a declared
+length)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,10 @@ import sys
 from pathlib import Path
 
 import httpx
+from starlette.types import Message, Receive, Scope, Send
+
+from server.station.api.gate import Gate
+from server.station.api.guard import DRAIN_LIMIT_BYTES, Guard
 
 ROOT = Path(__file__).resolve().parents[3]
 BODY_BYTES = 20 * 1024 * 1024
@@ -46,24 +51,60 @@ def test_a_20_mb_body_gets_413_and_the_process_grows_by_less_than_50_mb():
             f"{api}api/obstacles", content=body, headers={"content-type": "application/json"}, timeout=30
         )
 
-        offered = 0
-
         def chunks():
-            nonlocal offered
             for i in range(0, BODY_BYTES, 1 << 20):
-                offered += 1 << 20
                 yield body[i : i + (1 << 20)]
 
-        try:
-            streamed = httpx.post(f"{api}api/land_all", content=chunks(), timeout=30).status_code
-        except httpx.HTTPError:  # the station answered and closed while the client was still sending:
-            streamed = None  # it stopped reading (checked below), the answer was lost with the connection
+        streamed = httpx.post(f"{api}api/land_all", content=chunks(), timeout=30)
         grown = rss_bytes(proc.pid) - before
         state = httpx.get(f"{api}api/state", timeout=10).json()
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=60)
     assert declared.status_code == 413 and "larger than 65536 bytes" in declared.json()["detail"]
-    assert streamed == 413 or (streamed is None and offered < BODY_BYTES)
+    assert streamed.status_code == 413  # the client gets the answer, not a reset connection
     assert grown < 50 * 1024 * 1024, f"grew by {grown / 1e6:.1f} MB"
     assert all(v["phase"] != "landing" for v in state["vehicles"])  # nothing was commanded
+
+
+async def _guarded_post(declared_bytes: int, chunk_bytes: int = 1 << 20) -> tuple[int, int, bool]:
+    """POST `declared_bytes` through the Guard alone: (status, body bytes it read, whether the app ran)."""
+    reached = False
+
+    async def app(scope: Scope, receive: Receive, send: Send) -> None:
+        nonlocal reached
+        reached = True
+
+    sent = 0
+
+    async def receive() -> Message:
+        nonlocal sent
+        n = min(chunk_bytes, declared_bytes - sent)
+        sent += n
+        return {"type": "http.request", "body": b"x" * n, "more_body": sent < declared_bytes}
+
+    answer: list[Message] = []
+
+    async def send(message: Message) -> None:
+        answer.append(message)
+
+    guard = Guard(app, gate=Gate(None), on_refused=lambda *_: None)
+    scope: Scope = {
+        "type": "http",
+        "method": "POST",
+        "path": "/api/land_all",
+        "scheme": "http",
+        "headers": [(b"host", b"127.0.0.1:8000"), (b"content-length", str(declared_bytes).encode())],
+    }
+    await guard(scope, receive, send)
+    return answer[0]["status"], sent, reached
+
+
+async def test_an_oversized_body_is_read_and_dropped_before_the_413_up_to_the_drain_limit():
+    status, read, reached = await _guarded_post(5 * 1024 * 1024)
+    assert (status, read, reached) == (413, 5 * 1024 * 1024, False)
+
+
+async def test_a_body_declared_beyond_the_drain_limit_is_answered_without_reading_it():
+    status, read, reached = await _guarded_post(DRAIN_LIMIT_BYTES + 1)
+    assert (status, read, reached) == (413, 0, False)
