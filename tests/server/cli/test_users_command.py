@@ -4,25 +4,21 @@ secret hashed (never stored or printed), the file private to its owner, and bad 
 from __future__ import annotations
 
 import stat
-import subprocess
-import sys
 from pathlib import Path
 
+from click.testing import Result
+from typer.testing import CliRunner
+
+from server.cli import COMMANDS, _register, app
 from server.station.api.users import Users
 from webui.access import Role
 
-SKYRING = [sys.executable, "-c", "from server.cli import main; main()"]
-ROOT = Path(__file__).resolve().parents[3]
+_register("users", COMMANDS["users"])
 
 
-def add(file: Path, name: str, secret: str, *role: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [*SKYRING, "users", "add", str(file), name, *role, "--secret-stdin"],
-        input=secret + "\n",
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
+def add(file: Path, name: str, secret: str, *role: str) -> Result:
+    return CliRunner().invoke(
+        app, ["users", "add", str(file), name, *role, "--secret-stdin"], input=secret + "\n"
     )
 
 
@@ -30,10 +26,10 @@ def test_added_operators_sign_in_with_their_secret_which_is_stored_only_hashed(t
     file = tmp_path / "users.txt"
     first = add(file, "alice", "alice-secret-1")
     second = add(file, "bob", "bob-secret-22", "--role", "observer")
-    assert first.returncode == 0 and second.returncode == 0, first.stderr + second.stderr
+    assert first.exit_code == 0 and second.exit_code == 0, first.output + second.output
     text = file.read_text()
     assert "alice-secret-1" not in text and "bob-secret-22" not in text
-    assert "alice-secret-1" not in first.stdout + first.stderr
+    assert "alice-secret-1" not in first.output
     users = Users.load(file, {})
     assert users is not None and len(users) == 2
     alice, bob = users.check("alice", "alice-secret-1"), users.check("bob", "bob-secret-22")
@@ -45,10 +41,10 @@ def test_added_operators_sign_in_with_their_secret_which_is_stored_only_hashed(t
 
 def test_a_duplicate_name_or_a_short_secret_is_refused_and_the_file_left_as_it_was(tmp_path):
     file = tmp_path / "users.txt"
-    assert add(file, "alice", "alice-secret-1").returncode == 0
+    assert add(file, "alice", "alice-secret-1").exit_code == 0
     before = file.read_text()
     twice = add(file, "alice", "another-secret")
     short = add(file, "carol", "short")
-    assert twice.returncode == 1 and "listed twice" in twice.stderr
-    assert short.returncode == 1 and "at least 8 characters" in short.stderr
+    assert twice.exit_code == 1 and "listed twice" in twice.stderr
+    assert short.exit_code == 1 and "at least 8 characters" in short.stderr
     assert file.read_text() == before
