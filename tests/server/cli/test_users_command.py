@@ -6,8 +6,7 @@ from __future__ import annotations
 import stat
 from pathlib import Path
 
-from click.testing import Result
-from typer.testing import CliRunner
+from typer.testing import CliRunner, Result
 
 from server.cli import COMMANDS, _register, app
 from server.station.api.users import Users
