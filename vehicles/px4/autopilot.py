@@ -1,21 +1,31 @@
 """PX4 autopilots through MAVSDK 4: the `Autopilot` back-end for PX4 SITL and real vehicles.
 
 One `Px4Autopilot` per vehicle, each with its own `Mavsdk` instance and connection URL. `connect()` waits for
-the autopilot and its health, sets the failsafe parameters skyring relies on (`Px4Config.failsafe_params`),
-and reads the estimator origin; `start()` then runs, on the event loop it was connected on, one reader task
-per telemetry stream into a state cache, a supervisor task (vehicles/px4_supervisor.py: engagement, the
-set-point watchdog, respect for a pilot) and a set-point streaming task. The `Autopilot` methods are
+the autopilot and its position, sets the failsafe parameters skyring relies on (`Px4Config.failsafe_params`),
+and reads the estimator origin; it adopts the vehicle in whatever state it is found (on the ground in any
+mode, flying, in a failsafe) and changes nothing until asked. `start()` then runs, on the event loop it was
+connected on, one reader task per telemetry stream into a state cache, a supervisor task
+(vehicles/px4/supervisor.py: engagement, the set-point watchdog, respect for a pilot and for PX4's failsafes)
+and a set-point streaming task. The `Autopilot` methods are
 non-blocking requests, safe to call from any thread.
 
 Frames: the team's ENU frame is converted to the vehicle's local NED frame here and nowhere else
 (vehicles/geodesy.py). Telemetry goes the other way. Link loss (no telemetry for `link_lost_after_s`) is
 reported in `AutopilotState.link_lost`.
+
+Take-off works from every mode PX4 can be in on the ground: after a disarm PX4 v1.16 returns to the last mode
+that allows arming (Offboard after an offboard flight), where it refuses to arm without a set-point stream;
+so skyring first asks for Takeoff mode (PX4 accepts that disarmed), then arms, and PX4 climbs at once. What
+PX4 says reaches the state: its own mode name, whether it runs a failsafe (the critical system status of its
+heartbeat) and why, whether it can arm, and why it refused (STATUSTEXT and, where the vehicle serves them,
+PX4 events; vehicles/px4/notices.py).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import math
 import threading
@@ -28,6 +38,7 @@ import numpy as np
 from controller.messages import frozen_array
 from vehicles.autopilot import AutopilotState, FlightMode, Setpoint
 from vehicles.px4.geodesy import GeodeticPoint, LocalFrame, geodetic_to_enu
+from vehicles.px4.notices import SEVERITY_ERROR, Px4Message, Px4Notices, statustext_severity
 from vehicles.px4.supervisor import Command, Observation, OffboardSupervisor, SupervisorParams
 
 log = logging.getLogger(__name__)
@@ -35,6 +46,14 @@ log = logging.getLogger(__name__)
 # COM_OBL_RC_ACT values skyring accepts for the offboard-loss failsafe, and NAV_DLL_ACT values for GCS loss.
 OFFBOARD_LOSS_ACTIONS = {3: "Return", 4: "Land", 5: "Hold"}
 DATALINK_LOSS_ACTIONS = {0: "Disabled", 1: "Hold", 2: "Return", 3: "Land"}
+# COM_LOW_BAT_ACT values: what PX4 does at critical battery (its default, 0, only warns).
+LOW_BATTERY_ACTIONS = {0: "Warning", 2: "Land", 3: "Return at critical, land at emergency"}
+
+# HEARTBEAT system_status values PX4 sends: STANDBY disarmed with its pre-arm checks passing, ACTIVE armed,
+# CRITICAL armed and running a failsafe (UNINIT: disarmed and unable to arm in its current mode).
+MAV_STATE_STANDBY, MAV_STATE_ACTIVE, MAV_STATE_CRITICAL = 3, 4, 5
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_COMP_ID_AUTOPILOT1 = 1
 
 # MAVSDK telemetry flight modes -> skyring's (pilot modes all read as MANUAL; missions are someone else's).
 _MODES = {
@@ -66,7 +85,10 @@ class Px4Config:
     for this long flags LINK_LOST; offboard_loss_timeout_s and offboard_loss_action: PX4's COM_OF_LOSS_T and
     COM_OBL_RC_ACT (3 Return, 4 Land, 5 Hold): what PX4 does when skyring's set-points stop arriving;
     datalink_loss_action: NAV_DLL_ACT (0 off, 1 Hold, 2 Return, 3 Land) after COM_DL_LOSS_T without a ground
-    station heartbeat, which covers a vehicle left hovering in Hold; supervise_period_s: supervisor tick;
+    station heartbeat, which covers a vehicle left hovering in Hold; low_battery_action: COM_LOW_BAT_ACT (0
+    warn only, 2 Land, 3 Return then land; None leaves the vehicle's own setting); require_armable: also wait
+    for PX4's pre-arm checks at connect (off: a vehicle found in Offboard after an earlier flight cannot arm
+    until skyring switches its mode, and must still be adopted); supervise_period_s: supervisor tick;
     max_setpoint_rate_hz: set-points forwarded to MAVSDK at most this often (it re-sends the latest at 20 Hz);
     max_setpoint_range_m: set-points farther than this from the team origin are rejected and counted;
     min_takeoff_altitude_m: the lowest takeoff altitude above home skyring asks for.
@@ -78,7 +100,8 @@ class Px4Config:
     offboard_loss_timeout_s: float = 1.0
     offboard_loss_action: int = 4
     datalink_loss_action: int = 3
-    require_armable: bool = True
+    low_battery_action: int | None = 2
+    require_armable: bool = False
     supervise_period_s: float = 0.05
     max_setpoint_rate_hz: float = 20.0
     max_setpoint_range_m: float = 2000.0
@@ -97,6 +120,11 @@ class Px4Config:
                 f"datalink_loss_action (NAV_DLL_ACT) must be one of {DATALINK_LOSS_ACTIONS}, "
                 f"got {self.datalink_loss_action}"
             )
+        if self.low_battery_action is not None and self.low_battery_action not in LOW_BATTERY_ACTIONS:
+            raise ValueError(
+                f"low_battery_action (COM_LOW_BAT_ACT) must be one of {LOW_BATTERY_ACTIONS} or None, "
+                f"got {self.low_battery_action}"
+            )
         for name in (
             "connect_timeout_s",
             "health_timeout_s",
@@ -113,11 +141,14 @@ class Px4Config:
 
     def failsafe_params(self) -> dict[str, float | int]:
         """The PX4 parameters skyring sets on every vehicle it connects to (floats stay floats)."""
-        return {
+        params: dict[str, float | int] = {
             "COM_OF_LOSS_T": float(self.offboard_loss_timeout_s),
             "COM_OBL_RC_ACT": int(self.offboard_loss_action),
             "NAV_DLL_ACT": int(self.datalink_loss_action),
         }
+        if self.low_battery_action is not None:
+            params["COM_LOW_BAT_ACT"] = int(self.low_battery_action)
+        return params
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,7 +206,8 @@ def sitl_urls(count: int, *, first_port: int = 14540, host: str = "0.0.0.0") -> 
 class TelemetryCache:
     """The latest value of every telemetry stream, written by the reader tasks, read by `state()` from any
     thread (guarded by a lock). Local NED position/velocity, attitude (NED yaw), geodetic position and home,
-    flags, battery, health, GPS accuracy; `received_s` holds when each stream last delivered."""
+    flags, battery, health, GPS accuracy, PX4's heartbeat system status and messages (`notices`);
+    `received_s` holds when each stream last delivered."""
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
@@ -192,6 +224,9 @@ class TelemetryCache:
         self.battery_fraction: float | None = None
         self.health: dict[str, bool] = {}
         self.gps_std_m: tuple[float, float] | None = None
+        self.system_status: int | None = None
+        self.failsafe_since_s: float | None = None
+        self.notices = Px4Notices()
         self.received_s: dict[str, float] = {}
         self.position_stamp_s = -math.inf
         self.malformed = 0
@@ -217,9 +252,9 @@ class Px4Status:
 
     engagement: vehicles/px4_supervisor.Engagement value; setpoint_age_s: age of the agent's last set-point;
     counters: set-points ignored (not engaged) or rejected (malformed), land/hold requests not sent because a
-    pilot flies the vehicle, watchdog holds/landings, commands PX4 refused or that timed out, telemetry
-    readings dropped as malformed; frame_source: "origin" (the estimator
-    origin) or "fix" (inferred from one position reading); fault: the last problem, in words.
+    pilot flies the vehicle, watchdog holds/landings, take-offs that failed (PX4 refused to arm, or no
+    answer), commands PX4 refused or that timed out, telemetry readings dropped as malformed; frame_source:
+    "origin" (the estimator origin) or "fix" (inferred from one position reading); fault: the last problem.
     """
 
     vehicle_id: int
@@ -233,6 +268,7 @@ class Px4Status:
     rejected_setpoints: int
     watchdog_holds: int
     watchdog_landings: int
+    takeoff_failures: int
     failed_commands: int
     malformed_telemetry: int
     frame_source: str | None
@@ -265,6 +301,7 @@ class Px4Autopilot:
         self._mavsdk = None
         self._system = None
         self._telemetry = self._action = self._offboard = self._param = None
+        self._events = self._direct = None
         self._tasks: list[asyncio.Task] = []
         self._frame: LocalFrame | None = None
         self._frame_source: str | None = None
@@ -275,6 +312,8 @@ class Px4Autopilot:
         self._rejected_setpoints = 0
         self._failed_commands = 0
         self._fault: str | None = None
+        self._refused_at_s: float | None = None  # when PX4 last refused a take-off (arming) skyring asked for
+        self._refusal_fallback = ""
         self._executing = False
         self._stamp_clock: Callable[[], float] | None = None
 
@@ -284,6 +323,8 @@ class Px4Autopilot:
         from mavsdk import ComponentType, Configuration
         from mavsdk.asyncio import Mavsdk, MavsdkConnectionError
         from mavsdk.asyncio.plugins.action import ActionAsync
+        from mavsdk.asyncio.plugins.events import EventsAsync
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.asyncio.plugins.offboard import OffboardAsync
         from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
@@ -305,6 +346,8 @@ class Px4Autopilot:
         self._action = ActionAsync(self._system)
         self._offboard = OffboardAsync(self._system)
         self._param = ParamAsync(self._system)
+        self._events = EventsAsync(self._system)
+        self._direct = MavlinkDirectAsync(self._system)
         self._start_readers()
         await self._wait_healthy()
         await self._set_failsafe_params()
@@ -412,7 +455,14 @@ class Px4Autopilot:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         self._tasks.clear()
-        for plugin in (self._telemetry, self._action, self._offboard, self._param):
+        for plugin in (
+            self._telemetry,
+            self._action,
+            self._offboard,
+            self._param,
+            self._events,
+            self._direct,
+        ):
             if plugin is not None:
                 plugin.destroy()
         if self._mavsdk is not None:
@@ -434,6 +484,18 @@ class Px4Autopilot:
             armed, in_air, px4_mode = c.armed, c.in_air, c.px4_mode
             battery, health, gps_std = c.battery_fraction, dict(c.health), c.gps_std_m
             stamp, last = c.position_stamp_s, c.last_received_s()
+            failsafe = self._failsafe_locked()
+            failsafe_reason = (
+                c.notices.failsafe_reason(since_s=c.failsafe_since_s)
+                if failsafe and c.failsafe_since_s is not None
+                else None
+            )
+            can_arm = self._can_arm_locked()
+            refusal = None
+            if self._refused_at_s is not None and not (armed or in_air):
+                refusal = c.notices.arming_refusal(
+                    refused_at_s=self._refused_at_s, fallback=self._refusal_fallback
+                )
         cov = np.eye(3) * 0.25
         if gps_std is not None:
             cov = np.diag([gps_std[0] ** 2, gps_std[0] ** 2, gps_std[1] ** 2])
@@ -464,7 +526,27 @@ class Px4Autopilot:
             position_cov_m2=cov,
             link_lost=now - last > self.config.link_lost_after_s,
             released=self._supervisor.released,
+            autopilot_mode=px4_mode,
+            failsafe=failsafe,
+            failsafe_reason=failsafe_reason,
+            can_arm=can_arm,
+            arming_refusal=refusal,
         )
+
+    def _failsafe_locked(self) -> bool:
+        """PX4 runs a failsafe: its heartbeat says armed with a critical system status (cache lock held)."""
+        return self._cache.failsafe_since_s is not None
+
+    def _can_arm_locked(self) -> bool | None:
+        """PX4's pre-arm checks pass in its current mode (None while armed or not yet known; lock held)."""
+        c = self._cache
+        if c.armed:
+            return None
+        if "is_armable" in c.health:
+            return c.health["is_armable"]
+        if c.system_status is None:
+            return None
+        return c.system_status == MAV_STATE_STANDBY
 
     def send_setpoint(self, setpoint: Setpoint) -> None:
         reason = check_setpoint(setpoint, max_range_m=self.config.max_setpoint_range_m)
@@ -508,6 +590,7 @@ class Px4Autopilot:
             rejected_setpoints=self._rejected_setpoints,
             watchdog_holds=s.watchdog_holds,
             watchdog_landings=s.watchdog_landings,
+            takeoff_failures=s.takeoff_failures,
             failed_commands=self._failed_commands,
             malformed_telemetry=malformed,
             frame_source=self._frame_source,
@@ -549,6 +632,10 @@ class Px4Autopilot:
             "health": (t.subscribe_health, self._on_health),
             "home": (t.subscribe_home, self._on_home),
             "raw_gps": (t.subscribe_raw_gps, self._on_raw_gps),
+            "status_text": (t.subscribe_status_text, self._on_status_text),
+            "heartbeat": (lambda: self._direct.subscribe_message("HEARTBEAT"), self._on_heartbeat),
+            "events": (self._events.subscribe_events, self._on_event),
+            "arming_checks": (self._events.subscribe_health_and_arming_checks, self._on_arming_checks),
         }
         for name, (subscribe, apply) in streams.items():
             self._tasks.append(
@@ -645,6 +732,48 @@ class Px4Autopilot:
         self._cache.home = point
         return True
 
+    def _on_status_text(self, text, now: float) -> bool:
+        severity = statustext_severity(getattr(text.type, "value", 6))
+        self._cache.notices.add(Px4Message(t_s=now, text=str(text.text), severity=severity))
+        return True
+
+    def _on_heartbeat(self, message, now: float) -> bool:
+        """PX4's HEARTBEAT (through MAVSDK's mavlink_direct): its system status tells a failsafe."""
+        if message.component_id != MAV_COMP_ID_AUTOPILOT1:
+            return True  # another component's heartbeat (a camera, a gimbal): not the autopilot's state
+        try:
+            fields = json.loads(message.fields_json)
+            status = int(fields["system_status"])
+            armed = bool(int(fields["base_mode"]) & MAV_MODE_FLAG_SAFETY_ARMED)
+        except (ValueError, KeyError, TypeError):
+            return False
+        c = self._cache
+        c.system_status = status
+        if not (armed and status == MAV_STATE_CRITICAL):
+            c.failsafe_since_s = None
+        elif c.failsafe_since_s is None:
+            c.failsafe_since_s = now
+        return True
+
+    def _on_event(self, event, now: float) -> bool:
+        """A PX4 event (its events protocol): the detailed words behind its STATUSTEXT lines."""
+        level = getattr(event.log_level, "value", 6)
+        self._cache.notices.add(
+            Px4Message(
+                t_s=now, text=str(event.message), severity=int(level), source="event", name=event.event_name
+            )
+        )
+        return True
+
+    def _on_arming_checks(self, report, now: float) -> bool:
+        """PX4's health-and-arming-check report: the errors that stop arming in its current mode."""
+        intention = report.current_mode_intention
+        problems = tuple(
+            str(p.message) for p in intention.problems if getattr(p.log_level, "value", 7) <= SEVERITY_ERROR
+        )
+        self._cache.notices.set_arming_problems(now, problems if not intention.can_arm_or_run else ())
+        return True
+
     def _on_raw_gps(self, gps, now: float) -> bool:
         h, v = gps.horizontal_uncertainty_m, gps.vertical_uncertainty_m
         if _finite(h, v) and h > 0 and v > 0:
@@ -656,12 +785,16 @@ class Px4Autopilot:
         now = self._clock()
         with self._cache.lock:
             c = self._cache
+            if c.armed or c.in_air:
+                self._refused_at_s = None  # it flies: the last refusal is history
             return Observation(
                 now_s=now,
                 mode=skyring_mode(c.px4_mode, armed=c.armed, in_air=c.in_air),
                 armed=c.armed,
                 in_air=c.in_air,
                 link_lost=now - c.last_received_s() > self.config.link_lost_after_s,
+                failsafe=self._failsafe_locked(),
+                can_arm=self._can_arm_locked(),
             )
 
     async def _supervise(self) -> None:
@@ -692,15 +825,26 @@ class Px4Autopilot:
             self._failed_commands += 1
             self._fault = f"{command.value} failed: {exc or 'timed out'}"
             log.warning("vehicle %d: %s", self.vehicle_id, self._fault)
-            self._supervisor.command_failed(command)
+            now = self._clock()
+            if command is Command.TAKEOFF:
+                self._refused_at_s = now
+                self._refusal_fallback = (
+                    f"PX4 refused {exc.origin.removesuffix('()')} ({exc.result.name}) and gave no reason"
+                    if isinstance(exc, ActionError)
+                    else f"no answer from PX4 to the take-off within {self.config.command_timeout_s:.0f} s"
+                )
+            self._supervisor.command_failed(command, now)
 
     async def _command(self, command: Command) -> None:
         from mavsdk.asyncio.plugins.offboard import OffboardError
 
         if command is Command.TAKEOFF:
+            # Takeoff mode first: PX4 accepts it disarmed and allows arming there, whichever mode it was
+            # left in (after a disarm it returns to Offboard, where arming needs a set-point stream); once
+            # armed in Takeoff mode it climbs at once.
             await self._action.set_takeoff_altitude(self._takeoff_altitude_m())
-            await self._action.arm()
             await self._action.takeoff()
+            await self._action.arm()
         elif command is Command.START_OFFBOARD:
             if self._latest_setpoint is not None:
                 await self._forward(self._latest_setpoint)  # MAVSDK refuses to start without a set-point
@@ -714,12 +858,17 @@ class Px4Autopilot:
             await self._action.land()
 
     def _takeoff_altitude_m(self) -> float:
-        """MIS_TAKEOFF_ALT (above home) that brings the vehicle to the requested team-frame height."""
+        """MIS_TAKEOFF_ALT (above home) that brings the vehicle to the requested team-frame height. Home
+        resets where it arms, so the ground it stands on now is the base (its last home before that)."""
         height = self._supervisor.takeoff_height_m or 2.5
-        home_z = 0.0
-        if self.home is not None and self._reference is not None:
-            home_z = float(geodetic_to_enu(self.home, reference=self._reference)[2])
-        return max(self.config.min_takeoff_altitude_m, height - home_z)
+        ground_z = 0.0
+        with self._cache.lock:
+            local, in_air = self._cache.local_ned_m, self._cache.in_air
+        if local is not None and not in_air and self._frame is not None:
+            ground_z = float(self._frame.to_enu(local)[2])
+        elif self.home is not None and self._reference is not None:
+            ground_z = float(geodetic_to_enu(self.home, reference=self._reference)[2])
+        return max(self.config.min_takeoff_altitude_m, height - ground_z)
 
     # ---- internals: set-point streaming -------------------------------------------------------------------
     async def _stream(self) -> None:
