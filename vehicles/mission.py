@@ -7,11 +7,18 @@ machine per vehicle:
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
+    IDLE, airborne --(the operator starts the formation or releases it)--> FORMATION
+    TAKEOFF / FORMATION --(the autopilot lands or returns it by itself)--> LANDING
 
 A MAV that is landing or landed has left formation control: it publishes plans marked not-in-formation (then
-none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. Operator
-actions are methods that take effect at the next `step` (within one control period); a refused action raises
-`MissionError` with a message a person can act on and changes nothing.
+none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. The
+formation roster (the slots teammates space for) holds only vehicles that are airborne, heard, and flown by
+skyring: one on the ground (e.g. its autopilot refused to arm), one a pilot took, or one the autopilot flies
+in its own failsafe (Land, Hold, Return) is left out, and one the autopilot lands by itself is landing (its
+failsafe's landing stands: once down it waits for release). A vehicle found airborne when the mission starts
+(an earlier ground station flew it) is adopted as it is: avoided, not steered, until the operator starts the
+formation or releases it. Operator actions are methods that take effect at the next `step` (within one control
+period); a refused action raises `MissionError` with a message a person can act on and changes nothing.
 """
 
 from __future__ import annotations
@@ -67,7 +74,9 @@ class VehicleSnapshot:
     position_cov_m2 is the ellipsoid); setpoint: last set-point sent; status/solver_time_s: the controller's
     last result; tick_s: wall time of the last agent tick (None without a clock); link_age_s: age of the
     telemetry; teammates_known: teammates whose plans are fresh; used_slot: steering to the roster slot
-    because teammates are unheard; fault: last fault line.
+    because teammates are unheard; fault: last fault line; in_formation: in the formation roster and flown by
+    formation control now (False while its autopilot runs a failsafe, a pilot has it, its link is lost, or it
+    is not airborne).
     """
 
     vehicle_id: int
@@ -85,6 +94,7 @@ class VehicleSnapshot:
     fault: str | None
     tracker: TrackerStats
     counters: AgentCounters
+    in_formation: bool = False
 
 
 @dataclass(frozen=True)
@@ -126,6 +136,8 @@ class _Vehicle:
     tick_s: float | None = None
     paused: bool = False
     state: AutopilotState | None = None
+    in_roster: bool = False
+    resume: bool = False  # airborne and not flown by skyring: the operator asked for it to join
 
 
 class Mission:
@@ -244,15 +256,41 @@ class Mission:
                 self._start_landing(v)
 
     def release(self, vehicle_id: int) -> None:
-        """Give a landed vehicle back to the formation: it takes off again (when formation is enabled)."""
+        """Give a vehicle back to the formation: a landed one takes off again (when formation is enabled); an
+        airborne one skyring does not fly (adopted, or a pilot gave it back) joins it. Refused while the
+        vehicle's autopilot runs a failsafe: its decision stands until it ends or the vehicle is down."""
         v = self._vehicle(vehicle_id)
-        if v.phase != Phase.LANDED:
-            self._refuse(f"vehicle {vehicle_id} is {v.phase.value}; only a landed vehicle can be released")
-        v.phase = Phase.IDLE
+        s = v.state
+        if s is not None and s.failsafe:
+            why = f": {s.failsafe_reason}" if s.failsafe_reason else ""
+            self._refuse(
+                f"vehicle {vehicle_id} is in its autopilot's failsafe ({s.autopilot_mode or s.mode.value}"
+                f"{why}); it can rejoin once the failsafe ends or it has landed"
+            )
+        if v.phase == Phase.LANDED:
+            v.phase = Phase.IDLE
+            return
+        airborne_idle = v.phase == Phase.IDLE and s is not None and s.in_air
+        taken = v.phase in (Phase.TAKEOFF, Phase.FORMATION) and s is not None and s.in_air and s.released
+        if not (airborne_idle or taken):
+            self._refuse(
+                f"vehicle {vehicle_id} is {v.phase.value}; only a landed vehicle, or an airborne one skyring "
+                "does not fly, can be released"
+            )
+        v.resume = True
+        if taken:
+            v.command_s = self._now
+            v.autopilot.takeoff(self.takeoff_height_m())  # re-engages an airborne vehicle
 
     def set_formation_enabled(self, enabled: bool) -> None:
-        """Start (True) or stop (False) formation control; stopped MAVs hold position, idle ones stay down."""
+        """Start (True) or stop (False) formation control; stopped MAVs hold position, idle ones stay down.
+        Starting it also brings in the airborne vehicles skyring found flying (adopted) once their autopilot
+        lets it."""
         self._enabled = bool(enabled)
+        if self._enabled:
+            for v in self._vehicles.values():
+                if v.phase == Phase.IDLE and v.state is not None and v.state.in_air:
+                    v.resume = True
 
     # ---- the control tick ---------------------------------------------------------------------------------
     def step(self, now_s: float) -> None:
@@ -276,13 +314,9 @@ class Mission:
             )
             for vid in sorted(silent)
         )
-        roster = [
-            vid
-            for vid, v in self._vehicles.items()
-            if v.phase in (Phase.TAKEOFF, Phase.FORMATION)
-            and vid not in silent
-            and not (v.state is not None and v.state.released)
-        ]
+        roster = [vid for vid, v in self._vehicles.items() if vid not in silent and self._rostered(v)]
+        for vid, v in self._vehicles.items():
+            v.in_roster = vid in roster
         k = len(roster)
         offset = self._params.slot_offset_rad
         slots = tuple((vid, offset + 2.0 * math.pi * i / k) for i, vid in enumerate(roster))
@@ -325,7 +359,7 @@ class Mission:
             tracker = out.tracker if out is not None else TrackerStats()
             counters = out.counters if out is not None else AgentCounters()
             control = out.control if out is not None else None
-            k += v.phase in (Phase.TAKEOFF, Phase.FORMATION)
+            k += v.in_roster
             totals["rejected_detections"] += tracker.gated + tracker.stale + tracker.invalid
             totals["rejected_messages"] += counters.rejected_messages
             totals["controller_errors"] += counters.controller_errors
@@ -347,6 +381,7 @@ class Mission:
                     fault=out.fault if out is not None else None,
                     tracker=tracker,
                     counters=counters,
+                    in_formation=v.in_roster and self._role(v) == AgentRole.FORMATION,
                 )
             )
         return MissionSnapshot(
@@ -385,12 +420,44 @@ class Mission:
         v.command_s = self._now
         v.autopilot.land()
 
+    @staticmethod
+    def _autopilot_has_it(s: AutopilotState) -> bool:
+        """The autopilot flies the vehicle by itself (its failsafe, or a pilot): not skyring's to steer."""
+        return s.released or s.failsafe
+
+    @staticmethod
+    def _leaving(s: AutopilotState) -> bool:
+        """The autopilot is taking the vehicle down or home (Land, Return), whoever asked."""
+        return s.in_air and s.mode in (FlightMode.LAND, FlightMode.RETURN)
+
+    def _rostered(self, v: _Vehicle) -> bool:
+        """In the formation roster: taking off or in formation, airborne, and flown by skyring."""
+        s = v.state
+        return (
+            v.phase in (Phase.TAKEOFF, Phase.FORMATION)
+            and s is not None
+            and s.in_air
+            and not self._autopilot_has_it(s)
+            and not self._leaving(s)
+        )
+
     def _advance_phase(self, v: _Vehicle, now_s: float) -> None:
         s = v.state
         if s is None:
             return
         retry = now_s - v.command_s >= self._params.retry_s
-        if v.phase == Phase.IDLE and self._enabled and not s.in_air:
+        if v.phase in (Phase.TAKEOFF, Phase.FORMATION) and self._leaving(s):
+            v.phase = Phase.LANDING  # its autopilot lands (or returns) it: that landing stands
+            v.command_s = now_s
+        elif v.phase == Phase.IDLE and s.in_air:
+            # Found flying (adopted): avoided, not steered, until the operator asks for it and PX4 lets go.
+            if v.resume and self._enabled and not s.link_lost and not s.failsafe and not self._leaving(s):
+                v.phase = Phase.FORMATION
+                v.paused = False
+                v.command_s = now_s
+                v.autopilot.takeoff(self.takeoff_height_m())  # re-engages an airborne vehicle
+        elif v.phase == Phase.IDLE and self._enabled:
+            v.resume = False
             v.phase = Phase.TAKEOFF
             v.command_s = now_s
             v.autopilot.takeoff(self.takeoff_height_m())
@@ -416,15 +483,16 @@ class Mission:
         elif v.phase == Phase.LANDING:
             if not s.in_air:
                 v.phase = Phase.LANDED
-            elif retry and s.mode != FlightMode.LAND:
+            elif retry and s.mode not in (FlightMode.LAND, FlightMode.RETURN, FlightMode.MANUAL):
                 v.command_s = now_s
-                v.autopilot.land()
+                v.autopilot.land()  # e.g. PX4 ended its failsafe landing by itself: it still lands
 
     def _role(self, v: _Vehicle) -> AgentRole:
-        released = v.state is not None and v.state.released  # a pilot has it: avoid it, do not steer it
-        if v.phase == Phase.FORMATION and self._enabled and not released:
+        s = v.state
+        # A pilot or the autopilot's own failsafe has it: avoid it, do not steer it.
+        taken = s is not None and (self._autopilot_has_it(s) or self._leaving(s))
+        if v.phase == Phase.FORMATION and self._enabled and not taken:
             return AgentRole.FORMATION
-        airborne = v.state is not None and v.state.in_air
-        if airborne and v.phase in (Phase.TAKEOFF, Phase.FORMATION, Phase.LANDING):
+        if s is not None and s.in_air and v.phase != Phase.LANDED:
             return AgentRole.AIRBORNE
         return AgentRole.GROUND
