@@ -99,8 +99,12 @@ def test_sitl_urls_follow_px4_instance_ports():
 
 def test_failsafe_params_are_typed_for_px4():
     params = Px4Config(offboard_loss_action=5, datalink_loss_action=1).failsafe_params()
-    assert params == {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 5, "NAV_DLL_ACT": 1}
+    assert params == {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 5, "NAV_DLL_ACT": 1, "COM_LOW_BAT_ACT": 2}
     assert isinstance(params["COM_OF_LOSS_T"], float) and isinstance(params["COM_OBL_RC_ACT"], int)
+
+
+def test_battery_failsafe_is_left_alone_when_asked():
+    assert "COM_LOW_BAT_ACT" not in Px4Config(low_battery_action=None).failsafe_params()
 
 
 @pytest.mark.parametrize(
@@ -108,6 +112,7 @@ def test_failsafe_params_are_typed_for_px4():
     [
         {"offboard_loss_action": 0},
         {"datalink_loss_action": 4},
+        {"low_battery_action": 1},
         {"link_lost_after_s": 0.0},
         {"connect_timeout_s": math.nan},
     ],
