@@ -58,12 +58,15 @@ class MissionParams:
     """takeoff_height_m: None = the formation height (h_des above a person standing on the ground) clamped
     0.5 m inside the MPC's height bounds; at_height_tolerance_m: takeoff is done within this of the target;
     retry_s: a takeoff or land command that shows no effect is re-sent after this long (lost commands over a
-    real link); slot_offset_rad: bearing of roster slot 0 about the person (slot k at offset + 2 pi k / K)."""
+    real link); slot_offset_rad: bearing of roster slot 0 about the person (slot k at offset + 2 pi k / K);
+    mode_grace_s: how long an autopilot's mode reading may lag a command (PX4 reports its mode once a second):
+    a Land read sooner after a take-off command is the old mode, not the autopilot landing the vehicle."""
 
     takeoff_height_m: float | None = None
     at_height_tolerance_m: float = 0.5
     retry_s: float = 1.0
     slot_offset_rad: float = 0.0
+    mode_grace_s: float = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -446,7 +449,8 @@ class Mission:
         if s is None:
             return
         retry = now_s - v.command_s >= self._params.retry_s
-        if v.phase in (Phase.TAKEOFF, Phase.FORMATION) and self._leaving(s):
+        settled = now_s - v.command_s >= self._params.mode_grace_s
+        if v.phase in (Phase.TAKEOFF, Phase.FORMATION) and self._leaving(s) and settled:
             v.phase = Phase.LANDING  # its autopilot lands (or returns) it: that landing stands
             v.command_s = now_s
         elif v.phase == Phase.IDLE and s.in_air:
