@@ -396,7 +396,8 @@ class Station:
         return self.out_path.read_text(errors="replace")
 
     def wait_ready(self, timeout_s: float) -> float:
-        """Wait until /api/state answers; seconds since the process started."""
+        """Wait until /api/state answers after the first control tick (the vehicles' telemetry is in the
+        view); seconds since the process started."""
         deadline = self.started_s + timeout_s
         while True:
             if self.proc.poll() is not None:
@@ -404,7 +405,8 @@ class Station:
                     f"skyring serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}"
                 )
             with contextlib.suppress(httpx.HTTPError):
-                if self.client.get("/api/state").status_code == 200:
+                response = self.client.get("/api/state")
+                if response.status_code == 200 and response.json()["time_s"] > 0.0:
                     self.ready_s = time.monotonic()
                     return self.ready_s - self.started_s
             if time.monotonic() > deadline:

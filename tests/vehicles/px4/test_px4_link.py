@@ -232,7 +232,7 @@ async def test_ground_station_loss_lands_the_vehicle_by_px4s_offboard_failsafe()
         lost_at = peer.now()
         await wait_until(lambda: peer.mode is PeerMode.LAND, timeout_s=5.0, what="PX4's failsafe landing")
         log = [(t - lost_at, mode) for t, mode in peer.mode_log() if t >= lost_at]
-        # straight to COM_OBL_RC_ACT (Land) after COM_OF_LOSS_T, no Hold first: as PX4 v1.16 does (docs/px4.md)
+        # straight to COM_OBL_RC_ACT (Land) after COM_OF_LOSS_T, no Hold first: PX4 v1.16 (docs/px4.md)
         assert [mode for _, mode in log] == ["LAND"]
         assert log[0][0] == pytest.approx(1.0, abs=0.3)
         assert peer.failsafe and any("Failsafe activated" in text for _, _, text in peer.texts())
