@@ -113,10 +113,11 @@ class Team:
         return [t.mode for t in self.truth()]
 
     def airborne(self) -> list[bool]:
-        return [bool(t.enu_m[2] > 0.5) for t in self.truth()]
+        """More than 1 m up (PX4's own altitude estimate drifts by tens of centimetres on the ground)."""
+        return [bool(t.enu_m[2] > 1.0) for t in self.truth()]
 
     def on_ground_disarmed(self) -> list[bool]:
-        return [bool(t.enu_m[2] < 0.3 and not t.armed) for t in self.truth()]
+        return [bool(t.enu_m[2] < 1.0 and not t.armed) for t in self.truth()]
 
     def close(self) -> None:
         raise NotImplementedError
@@ -171,6 +172,10 @@ mavlink start -x -u {api_local} -r 4000000 -f -m onboard -o {api_remote}
 """
 
 
+# PX4's console goes to a file; line-buffered, its lines arrive as PX4 prints them (stdbuf execs px4).
+_LINE_BUFFERED = ["stdbuf", "-oL", "-eL"] if shutil.which("stdbuf") else []
+
+
 def _instance_free(instance: int) -> bool:
     """No PX4 holds instance's lock file (/tmp/px4_lock-N, locked by a running PX4 server)."""
     path = Path(f"/tmp/px4_lock-{instance}")
@@ -186,10 +191,13 @@ def _instance_free(instance: int) -> bool:
 
 
 class _GcsListener:
-    """Hears one PX4 instance's GCS link (sends nothing): position, mode, armed, failsafe, STATUSTEXT."""
+    """Hears one PX4 instance's GCS link (sends nothing): position, mode, armed, failsafe; and follows its
+    console for what it says. (PX4 sends STATUSTEXT only to a link that a ground station's heartbeat reached,
+    and the test must not pose as one; PX4 prints every such line on its console too.)"""
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, console: Path) -> None:
         self.truth = VehicleTruth()
+        self._console = console
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", port))
         self._sock.settimeout(0.2)
@@ -201,7 +209,9 @@ class _GcsListener:
         self._thread.start()
 
     def _run(self) -> None:
+        offset = 0
         while not self._stop.is_set():
+            offset = self._follow_console(offset)
             try:
                 data = self._sock.recv(65535)
             except (TimeoutError, OSError):
@@ -212,6 +222,20 @@ class _GcsListener:
                 continue
             for msg in messages:
                 self._handle(msg)
+
+    def _follow_console(self, offset: int) -> int:
+        """New complete lines of PX4's console (WARN/ERROR lines carry its STATUSTEXT), stamped on arrival."""
+        with contextlib.suppress(OSError), open(self._console, "rb") as f:
+            f.seek(offset)
+            chunk = f.read()
+            end = chunk.rfind(b"\n") + 1
+            now = time.monotonic()
+            with self._lock:
+                for line in chunk[:end].decode(errors="replace").splitlines():
+                    if line.startswith(("WARN", "ERROR")):
+                        self.truth.texts.append((now, line.split("] ", 1)[-1].strip()))
+            return offset + end
+        return offset
 
     def _handle(self, msg) -> None:
         kind = msg.get_type()
@@ -300,11 +324,20 @@ class SitlTeam(Team):
         }
         log = root / "px4.log"
         self.logs.append(log)
-        self.listeners.append(_GcsListener(gcs_remote))
+        self.listeners.append(_GcsListener(gcs_remote, log))
         with open(log, "wb") as out:
             self.processes.append(
                 subprocess.Popen(
-                    [str(self.binary), "-d", str(root / "etc"), "-i", str(instance), "-w", str(work)],
+                    [
+                        *_LINE_BUFFERED,
+                        str(self.binary),
+                        "-d",
+                        str(root / "etc"),
+                        "-i",
+                        str(instance),
+                        "-w",
+                        str(work),
+                    ],
                     stdin=subprocess.DEVNULL,
                     stdout=out,
                     stderr=subprocess.STDOUT,
@@ -316,12 +349,17 @@ class SitlTeam(Team):
 
     def _wait_ready(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
-        for proc, log in zip(self.processes, self.logs, strict=True):
-            while b"Ready for takeoff" not in log.read_bytes():
+        # Not "Ready for takeoff": a vehicle set up to refuse arming never says it.
+        for proc, log, listener in zip(self.processes, self.logs, self.listeners, strict=True):
+            while not (
+                b"Startup script returned successfully" in (text := log.read_bytes())
+                and b"home set" in text
+                and np.all(np.isfinite(listener.snapshot().enu_m))
+            ):
                 if proc.poll() is not None:
                     raise RuntimeError(f"PX4 exited with {proc.returncode}; its log: {log}")
                 if time.monotonic() > deadline:
-                    raise TimeoutError(f"PX4 not ready for takeoff within {timeout_s:.0f} s; its log: {log}")
+                    raise TimeoutError(f"PX4 not up with a home within {timeout_s:.0f} s; its log: {log}")
                 time.sleep(0.2)
 
     def truth(self) -> list[VehicleTruth]:
@@ -390,7 +428,9 @@ class Station:
         self.ready_s: float | None = None
         self._out = open(self.out_path, "wb")  # noqa: SIM115 - closed in stop()
         self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=subprocess.STDOUT, cwd=REPO)
-        self.client = httpx.Client(base_url=self.api, timeout=5.0)
+        self.client = httpx.Client(
+            base_url=self.api, timeout=15.0
+        )  # generous: a loaded machine, a thawed process
 
     def output(self) -> str:
         return self.out_path.read_text(errors="replace")

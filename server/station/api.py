@@ -27,6 +27,9 @@ from server.station.ground_station import GroundStation
 from webui.view import SceneView, VehicleView
 
 Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Override = Annotated[
+    bool, Query(description="take off or join although the pre-take-off checks refuse a MAV (logged)")
+]
 
 
 class FormationModel(BaseModel):
@@ -293,11 +296,6 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
     async def put_formation(body: FormationModel) -> FormationStateModel:
         station.set_formation(d_des_m=body.d_des_m, h_des_m=body.h_des_m)
         return formation_model(station.scene_view())
-
-    Override = Annotated[
-        bool,
-        Query(description="take off or join although the pre-take-off checks refuse a MAV (logged)"),
-    ]
 
     @app.post(
         "/api/formation/start",
