@@ -38,8 +38,14 @@ import numpy as np
 from controller.messages import frozen_array
 from vehicles.autopilot import AutopilotState, FlightMode, Setpoint
 from vehicles.px4.geodesy import GeodeticPoint, LocalFrame, geodetic_to_enu
-from vehicles.px4.notices import SEVERITY_ERROR, Px4Message, Px4Notices, statustext_severity
-from vehicles.px4.supervisor import Command, Observation, OffboardSupervisor, SupervisorParams
+from vehicles.px4.notices import (
+    FAILSAFE_ACTION_EVENTS,
+    SEVERITY_ERROR,
+    Px4Message,
+    Px4Notices,
+    statustext_severity,
+)
+from vehicles.px4.supervisor import Command, Engagement, Observation, OffboardSupervisor, SupervisorParams
 
 log = logging.getLogger(__name__)
 
@@ -119,6 +125,12 @@ class Px4Config:
             raise ValueError(
                 f"datalink_loss_action (NAV_DLL_ACT) must be one of {DATALINK_LOSS_ACTIONS}, "
                 f"got {self.datalink_loss_action}"
+            )
+        if self.supervisor.stall_land_after_s <= self.offboard_loss_timeout_s:
+            raise ValueError(
+                f"supervisor.stall_land_after_s ({self.supervisor.stall_land_after_s} s) must exceed "
+                f"offboard_loss_timeout_s ({self.offboard_loss_timeout_s} s): only a stall longer than PX4's "
+                "offboard-loss timeout has set off its failsafe"
             )
         if self.low_battery_action is not None and self.low_battery_action not in LOW_BATTERY_ACTIONS:
             raise ValueError(
@@ -226,6 +238,8 @@ class TelemetryCache:
         self.gps_std_m: tuple[float, float] | None = None
         self.system_status: int | None = None
         self.failsafe_since_s: float | None = None
+        self.failsafe_reports = 0  # critical heartbeats and Land (EXTENDED_SYS_STATE) readings so far
+        self.failsafe_report_s: float | None = None
         self.notices = Px4Notices()
         self.received_s: dict[str, float] = {}
         self.position_stamp_s = -math.inf
@@ -314,6 +328,8 @@ class Px4Autopilot:
         self._fault: str | None = None
         self._refused_at_s: float | None = None  # when PX4 last refused a take-off (arming) skyring asked for
         self._refusal_fallback = ""
+        self._failsafe_reports_seen = 0
+        self._last_step_s: float | None = None  # when the supervisor loop last went round
         self._executing = False
         self._stamp_clock: Callable[[], float] | None = None
 
@@ -485,11 +501,12 @@ class Px4Autopilot:
             battery, health, gps_std = c.battery_fraction, dict(c.health), c.gps_std_m
             stamp, last = c.position_stamp_s, c.last_received_s()
             failsafe = self._failsafe_locked()
-            failsafe_reason = (
-                c.notices.failsafe_reason(since_s=c.failsafe_since_s)
-                if failsafe and c.failsafe_since_s is not None
-                else None
-            )
+            failsafe_reason = None
+            if failsafe and c.failsafe_since_s is not None:
+                failsafe_reason = c.notices.failsafe_reason(since_s=c.failsafe_since_s)
+            elif self._supervisor.failsafe_landing or self._stalled(now):
+                failsafe = True  # PX4's failsafe landing, which skyring keeps going
+                failsafe_reason = self._failsafe_landing_reason(now)
             can_arm = self._can_arm_locked()
             refusal = None
             if self._refused_at_s is not None and not (armed or in_air):
@@ -532,6 +549,34 @@ class Px4Autopilot:
             can_arm=can_arm,
             arming_refusal=refusal,
         )
+
+    def _stalled(self, now: float) -> bool:
+        """The supervisor loop has not run past stall_land_after_s while following: the whole ground station
+        stalled, so PX4 runs its offboard-loss failsafe (the supervisor lands it on its next step)."""
+        limit = self.config.supervisor.stall_land_after_s
+        return (
+            self._supervisor.engagement is Engagement.FOLLOWING
+            and self._last_step_s is not None
+            and now - self._last_step_s > limit
+        )
+
+    def _failsafe_landing_reason(self, now: float) -> str:
+        """Why a vehicle lands for PX4's failsafe that PX4 itself no longer reports (cache lock held)."""
+        c = self._cache
+        stall = self._supervisor.stall_s
+        if stall is None and self._last_step_s is not None and self._stalled(now):
+            stall = now - self._last_step_s
+        said = (
+            c.notices.failsafe_reason(since_s=c.failsafe_report_s)
+            if c.failsafe_report_s is not None
+            else None
+        )
+        if stall is not None and (said is None or said.startswith("PX4 failsafe (PX4 gave no reason)")):
+            return (
+                f"the ground station stalled {stall:.1f} s, past PX4's offboard-loss timeout "
+                f"({self.config.offboard_loss_timeout_s:g} s): PX4 lands it, and skyring keeps it landing"
+            )
+        return f"{said or 'PX4 failsafe'}; PX4 left it, skyring keeps it landing"
 
     def _failsafe_locked(self) -> bool:
         """PX4 runs a failsafe: its heartbeat says armed with a critical system status (cache lock held)."""
@@ -703,6 +748,9 @@ class Px4Autopilot:
             self._cache.in_air = False
         elif name in ("IN_AIR", "TAKING_OFF", "LANDING"):
             self._cache.in_air = True
+        if name == "LANDING":  # PX4 lands it (5 Hz: sooner than its 1 Hz heartbeat shows Land)
+            self._cache.failsafe_reports += 1
+            self._cache.failsafe_report_s = now
         return True
 
     def _on_battery(self, battery, now: float) -> bool:
@@ -751,18 +799,25 @@ class Px4Autopilot:
         c.system_status = status
         if not (armed and status == MAV_STATE_CRITICAL):
             c.failsafe_since_s = None
-        elif c.failsafe_since_s is None:
+            return True
+        if c.failsafe_since_s is None:
             c.failsafe_since_s = now
+        c.failsafe_reports += 1
+        c.failsafe_report_s = now
         return True
 
     def _on_event(self, event, now: float) -> bool:
         """A PX4 event (its events protocol): the detailed words behind its STATUSTEXT lines."""
-        level = getattr(event.log_level, "value", 6)
+        level = int(getattr(event.log_level, "value", 6))
+        name = str(event.event_name)
         self._cache.notices.add(
-            Px4Message(
-                t_s=now, text=str(event.message), severity=int(level), source="event", name=event.event_name
-            )
+            Px4Message(t_s=now, text=str(event.message), severity=level, source="event", name=name)
         )
+        if name in FAILSAFE_ACTION_EVENTS:
+            # Events are PX4's reliable channel (sequenced; MAVSDK asks again for missed ones): a failsafe is
+            # known even when the heartbeats of its time were lost, e.g. while the ground station was stalled.
+            self._cache.failsafe_reports += 1
+            self._cache.failsafe_report_s = now
         return True
 
     def _on_arming_checks(self, report, now: float) -> bool:
@@ -787,6 +842,9 @@ class Px4Autopilot:
             c = self._cache
             if c.armed or c.in_air:
                 self._refused_at_s = None  # it flies: the last refusal is history
+            reported = c.failsafe_reports > self._failsafe_reports_seen
+            self._failsafe_reports_seen = c.failsafe_reports
+            stalled = 0.0 if self._last_step_s is None else now - self._last_step_s
             return Observation(
                 now_s=now,
                 mode=skyring_mode(c.px4_mode, armed=c.armed, in_air=c.in_air),
@@ -794,13 +852,18 @@ class Px4Autopilot:
                 in_air=c.in_air,
                 link_lost=now - c.last_received_s() > self.config.link_lost_after_s,
                 failsafe=self._failsafe_locked(),
+                failsafe_reported=reported,
                 can_arm=self._can_arm_locked(),
+                stalled_s=stalled,
             )
 
     async def _supervise(self) -> None:
         while True:
             try:
+                was = self._supervisor.engagement
                 command = self._supervisor.step(self._observe())
+                if self._supervisor.released and was is not Engagement.RELEASED:
+                    log.warning("vehicle %d: %s", self.vehicle_id, self._supervisor.released_reason)
                 if command is not None:
                     self._executing = True
                     try:
@@ -812,6 +875,7 @@ class Px4Autopilot:
             except Exception as exc:  # the supervisor must outlive any single failure
                 self._fault = f"supervisor: {exc}"
                 log.exception("vehicle %d: supervisor step failed", self.vehicle_id)
+            self._last_step_s = self._clock()  # (a command's wait is not a stall)
             await asyncio.sleep(self.config.supervise_period_s)
 
     async def _execute(self, command: Command) -> None:

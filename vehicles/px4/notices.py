@@ -20,7 +20,17 @@ SEVERITY_ERROR = 3
 
 ARMING_PREFIXES = ("Arming denied", "Preflight Fail", "Takeoff denied", "Arming refused")
 FAILSAFE_PREFIX = "Failsafe activated"
-FAILSAFE_EVENT_PREFIX = "commander_failsafe_enter"
+# PX4 v1.16's events for a failsafe that acts (switches mode); the other commander_failsafe_enter_* events
+# are warnings only (e.g. "Low battery level, return advised").
+FAILSAFE_ACTION_EVENTS = frozenset(
+    {
+        "commander_failsafe_enter",
+        "commander_failsafe_enter_generic",
+        "commander_failsafe_enter_hold",
+        "commander_failsafe_enter_generic_hold",
+        "commander_failsafe_enter_autopilot_disengaged",
+    }
+)
 
 
 @dataclass(frozen=True)
@@ -98,7 +108,7 @@ class Px4Notices:
         """Why PX4 is in the failsafe that began at since_s: its failsafe event when the events protocol gave
         one, else its "Failsafe activated" line with the critical lines sent beside it."""
         recent = [m for m in self._messages if m.t_s >= since_s - margin_s]
-        events = [m for m in recent if m.name.startswith(FAILSAFE_EVENT_PREFIX)]
+        events = [m for m in recent if m.name in FAILSAFE_ACTION_EVENTS]
         if events:
             return events[-1].text
         lines = [m for m in recent if m.source == "statustext" and m.text.startswith(FAILSAFE_PREFIX)]

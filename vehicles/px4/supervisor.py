@@ -8,7 +8,10 @@ while a pilot flies it (a manual mode) skyring's land and hold requests are not 
 
 A take-off PX4 refuses (its arming checks fail) is not hammered: it is tried again `refused_retry_s` later,
 and only once PX4 reports it can arm. A vehicle PX4 takes over for one of its own failsafes (Land, Hold,
-Return) is released at once, before the set-point watchdog would have its say: PX4's decision stands.
+Return) is released at once, before the set-point watchdog would have its say: PX4's decision stands. And
+when PX4 ran a failsafe while skyring flew it but is back in offboard by the time skyring looks (the whole
+ground station stalled past COM_OF_LOSS_T; on waking, MAVSDK re-sends its last, stale set-point, which ends
+PX4's offboard-loss failsafe at once), skyring lands it: the failsafe's landing stands.
 
 Pure and clock-free: the asyncio back-end (vehicles/px4/autopilot.py) reports set-points and telemetry
 observations, and executes the one `Command` that `step` returns. Engagement:
@@ -16,6 +19,8 @@ observations, and executes the one `Command` that `step` returns. Engagement:
     IDLE -takeoff-> TAKING_OFF -in Hold at height-> ENGAGING -pre-streamed-> FOLLOWING
     TAKING_OFF -refused-> TAKING_OFF (again after refused_retry_s, once PX4 can arm)
     FOLLOWING -stale output-> WATCHDOG_HOLD -fresh output-> ENGAGING ; -stale longer-> LANDING
+    FOLLOWING -PX4 reported a failsafe, yet shows offboard-> LANDING (failsafe_landing)
+    FOLLOWING -the supervisor itself stalled past stall_land_after_s-> LANDING (failsafe_landing)
     any -land-> LANDING (latched) -on the ground, disarmed-> IDLE
     FOLLOWING/ENGAGING/holds -mode changed by someone else-> RELEASED -takeoff-> ENGAGING or TAKING_OFF
 """
@@ -57,7 +62,11 @@ class SupervisorParams:
     streamed before switching to offboard (PX4 >= 1.14 wants > 1 s at > 2 Hz); retry_after_s: a command whose
     effect does not show is sent again after this; mode_grace_s: how long a mode change may take to appear in
     telemetry (PX4 sends its heartbeat at 1 Hz), during which the old mode is not read as someone else's;
-    refused_retry_s: a take-off PX4 refused (or that failed) is tried again after this, once PX4 can arm."""
+    refused_retry_s: a take-off PX4 refused (or that failed) is tried again after this, once PX4 can arm;
+    stall_land_after_s: the supervisor itself did not run for this long while following (the whole ground
+    station stalled, MAVSDK's threads with it): PX4 has been without set-points past its offboard-loss
+    timeout (COM_OF_LOSS_T, 1 s) and runs its failsafe, which MAVSDK's stale set-point is about to end: land
+    at once."""
 
     hold_after_s: float = 0.5
     land_after_s: float = 5.0
@@ -65,13 +74,14 @@ class SupervisorParams:
     retry_after_s: float = 1.0
     mode_grace_s: float = 2.0
     refused_retry_s: float = 10.0
+    stall_land_after_s: float = 2.0
 
     def __post_init__(self) -> None:
         if not (0.0 < self.hold_after_s < self.land_after_s and math.isfinite(self.land_after_s)):
             raise ValueError(
                 f"need 0 < hold_after_s < land_after_s, got {self.hold_after_s} and {self.land_after_s}"
             )
-        for name in ("prestream_s", "retry_after_s", "mode_grace_s", "refused_retry_s"):
+        for name in ("prestream_s", "retry_after_s", "mode_grace_s", "refused_retry_s", "stall_land_after_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be a non-negative number of seconds, got {value}")
@@ -80,7 +90,9 @@ class SupervisorParams:
 @dataclass(frozen=True)
 class Observation:
     """The vehicle as telemetry shows it at now_s (seconds, the back-end's clock). failsafe: PX4 runs one of
-    its own failsafes; can_arm: PX4's pre-arm checks pass in its current mode (None: not known)."""
+    its own failsafes; failsafe_reported: PX4 reported running one (a critical heartbeat, or its Land) since
+    the previous observation, even if it no longer does; can_arm: PX4's pre-arm checks pass in its current
+    mode (None: not known); stalled_s: seconds since the supervisor's previous step (its loop's own gap)."""
 
     now_s: float
     mode: FlightMode
@@ -88,7 +100,9 @@ class Observation:
     in_air: bool
     link_lost: bool = False
     failsafe: bool = False
+    failsafe_reported: bool = False
     can_arm: bool | None = None
+    stalled_s: float = 0.0
 
 
 # What each command should make the flight mode show.
@@ -113,6 +127,10 @@ class OffboardSupervisor:
         self.watchdog_holds = 0
         self.watchdog_landings = 0
         self.takeoff_failures = 0
+        self.failsafe_landing = False  # landing because PX4 ran a failsafe while skyring flew it
+        self.stall_s: float | None = (
+            None  # how long the ground station stalled, when that started the landing
+        )
         self._takeoff_failed_s: float | None = None  # a take-off that failed and waits to be tried again
         self._last_setpoint_s: float | None = None
         self._stream_start_s: float | None = None
@@ -180,6 +198,9 @@ class OffboardSupervisor:
     def step(self, obs: Observation) -> Command | None:
         """Advance the state machine with one observation; the command to issue now, if any."""
         command = self._apply_requests(obs)
+        if command is not None:
+            return self._issue(command, obs.now_s)
+        command = self._px4_failsafe_while_engaged(obs)
         if command is not None:
             return self._issue(command, obs.now_s)
         handler = {
@@ -273,6 +294,7 @@ class OffboardSupervisor:
     def _release(self, obs: Observation) -> None:
         self.engagement = Engagement.RELEASED
         self._takeoff_failed_s = None
+        self.failsafe_landing = False
         if obs.failsafe:
             self.released_reason = f"PX4 failsafe ({obs.mode.value}): skyring released control"
         else:
@@ -308,8 +330,8 @@ class OffboardSupervisor:
         return None
 
     def _engaging(self, obs: Observation) -> Command | None:
-        if obs.mode is FlightMode.OFFBOARD:
-            self.engagement = Engagement.FOLLOWING
+        if obs.mode is FlightMode.OFFBOARD and self._last_command is Command.START_OFFBOARD:
+            self.engagement = Engagement.FOLLOWING  # (an Offboard read before skyring asked for it is stale)
             return None
         if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD, self._engaged_from)):
             self._release(obs)
@@ -365,6 +387,7 @@ class OffboardSupervisor:
     def _landing(self, obs: Observation) -> Command | None:
         if not obs.in_air and not obs.armed:
             self.engagement = Engagement.IDLE
+            self.failsafe_landing = False
             return None
         if self._foreign_mode(obs, (FlightMode.LAND, FlightMode.HOLD, FlightMode.OFFBOARD, FlightMode.READY)):
             self._release(obs)  # a pilot took over during the landing
@@ -378,6 +401,31 @@ class OffboardSupervisor:
             self.engagement = Engagement.IDLE
             self.released_reason = None
         return None
+
+    def _px4_failsafe_while_engaged(self, obs: Observation) -> Command | None:
+        """Land a vehicle PX4 ran a failsafe on while skyring flew it, whatever its mode reads now: after a
+        stall of the whole ground station (PX4 lost the set-points past its timeout, and what telemetry shows
+        now may be from before), or when PX4 reported a failsafe it has already left (MAVSDK's stale set-point
+        ends its offboard-loss failsafe at once). A failsafe PX4 still runs is left to it (`_foreign_mode`).
+        """
+        offboard = (Engagement.FOLLOWING, Engagement.ENGAGING)
+        if self.engagement in offboard and obs.stalled_s > self.params.stall_land_after_s:
+            return self._failsafe_land(stall_s=obs.stalled_s)
+        held = (*offboard, Engagement.WATCHDOG_HOLD, Engagement.HOLDING)
+        if (
+            self.engagement in held
+            and obs.failsafe_reported
+            and not obs.link_lost
+            and obs.mode in (FlightMode.OFFBOARD, FlightMode.HOLD)
+        ):
+            return self._failsafe_land(stall_s=None)
+        return None
+
+    def _failsafe_land(self, *, stall_s: float | None) -> Command:
+        self.engagement = Engagement.LANDING
+        self.failsafe_landing = True
+        self.stall_s = stall_s
+        return Command.LAND
 
     def _watchdog_land(self) -> Command:
         self.engagement = Engagement.LANDING
