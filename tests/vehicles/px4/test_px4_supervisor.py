@@ -265,3 +265,58 @@ def test_land_request_lands_a_vehicle_released_to_a_px4_failsafe():
     run(sup, t, t + 2.0, FlightMode.RETURN)
     sup.request_land()
     assert sup.step(obs(t + 2.0, FlightMode.RETURN)) is Command.LAND
+
+
+def test_offboard_read_before_skyring_asked_for_it_is_not_taken_as_engaged():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    run(sup, 0.05, 1.5, FlightMode.HOLD, setpoints=False)
+    assert sup.engagement is Engagement.ENGAGING
+    # a stale Offboard reading (e.g. from before a watchdog Hold) while pre-streaming: still engaging
+    run(sup, 1.5, 1.7, FlightMode.OFFBOARD)
+    assert sup.engagement is Engagement.ENGAGING
+
+
+def test_a_stall_of_the_whole_station_while_following_lands_the_vehicle_as_px4s_failsafe():
+    sup, t = following()
+    sup.note_setpoint(t + 6.0)  # the agent's first set-point after the stall came in before this step
+    cmd = sup.step(
+        Observation(now_s=t + 6.0, mode=FlightMode.OFFBOARD, armed=True, in_air=True, stalled_s=6.0)
+    )
+    assert cmd is Command.LAND
+    assert sup.engagement is Engagement.LANDING and sup.failsafe_landing and sup.stall_s == 6.0
+    assert sup.watchdog_landings == 0
+
+
+def test_a_short_gap_in_the_supervisor_is_no_stall():
+    sup, t = following()
+    sup.note_setpoint(t + 1.0)
+    cmd = sup.step(
+        Observation(now_s=t + 1.0, mode=FlightMode.OFFBOARD, armed=True, in_air=True, stalled_s=1.0)
+    )
+    assert cmd is None and sup.engagement is Engagement.FOLLOWING
+
+
+def test_a_failsafe_px4_reported_but_already_left_lands_the_vehicle():
+    sup, t = following()
+    sup.note_setpoint(t)
+    # PX4 landed it, then MAVSDK's stale set-point took it back to Offboard before skyring looked
+    cmd = sup.step(
+        Observation(now_s=t, mode=FlightMode.OFFBOARD, armed=True, in_air=True, failsafe_reported=True)
+    )
+    assert cmd is Command.LAND and sup.failsafe_landing
+    run(sup, t + 0.05, t + 3.0, FlightMode.LAND)
+    sup.step(obs(t + 3.0, FlightMode.READY, armed=False, in_air=False))
+    assert sup.engagement is Engagement.IDLE and not sup.failsafe_landing
+
+
+def test_a_failsafe_px4_still_runs_is_left_to_px4():
+    sup, t = following()
+    sup.note_setpoint(t)
+    cmd = sup.step(
+        Observation(
+            now_s=t, mode=FlightMode.LAND, armed=True, in_air=True, failsafe=True, failsafe_reported=True
+        )
+    )
+    assert cmd is None and sup.released and not sup.failsafe_landing
