@@ -44,9 +44,10 @@ class AutopilotState:
     What the autopilot itself says, beyond skyring's reading of it (empty or None when a back-end cannot
     tell): autopilot_mode: the autopilot's own mode name (PX4: "OFFBOARD", "LAND", "HOLD",
     "RETURN_TO_LAUNCH", ...), shown even where `mode` reads READY on the ground; failsafe: the autopilot runs
-    one of its own failsafes now (PX4: a critical system status while armed), and failsafe_reason its words
-    for it; can_arm: its pre-arm checks pass in its current mode (None: unknown); arming_refusal: its words
-    for why the last arming or takeoff skyring asked for was refused (None once one succeeds).
+    one of its own failsafes now (PX4: a critical system status while armed), or the vehicle lands because of
+    one the autopilot has already left, and failsafe_reason its words for it; can_arm: its pre-arm checks
+    pass in its current mode (None: unknown); arming_refusal: its words for why the last arming or takeoff
+    skyring asked for was refused (None once one succeeds).
     """
 
     vehicle_id: int

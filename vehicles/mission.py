@@ -141,6 +141,7 @@ class _Vehicle:
     state: AutopilotState | None = None
     in_roster: bool = False
     resume: bool = False  # airborne and not flown by skyring: the operator asked for it to join
+    held_since_s: float | None = None  # taking off: when the autopilot was first seen holding
 
 
 class Mission:
@@ -466,13 +467,18 @@ class Mission:
             v.command_s = now_s
             v.autopilot.takeoff(self.takeoff_height_m())
         elif v.phase == Phase.TAKEOFF:
-            if (
-                s.in_air
-                and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
-                and (abs(s.position_m[2] - self.takeoff_height_m()) <= self._params.at_height_tolerance_m)
-            ):
+            held = s.in_air and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
+            if held and v.held_since_s is None:
+                v.held_since_s = now_s
+            elif not held:
+                v.held_since_s = None
+            at_height = abs(s.position_m[2] - self.takeoff_height_m()) <= self._params.at_height_tolerance_m
+            # A take-off that ends away from the formation height (the autopilot climbed to another one) joins
+            # all the same once the autopilot has held for mode_grace_s: the controller brings it to height.
+            if held and (at_height or now_s - v.held_since_s >= self._params.mode_grace_s):
                 v.phase = Phase.FORMATION
                 v.paused = False
+                v.held_since_s = None
             elif retry and s.mode != FlightMode.TAKEOFF and not s.in_air:
                 v.command_s = now_s
                 v.autopilot.takeoff(self.takeoff_height_m())

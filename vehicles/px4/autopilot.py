@@ -15,7 +15,7 @@ reported in `AutopilotState.link_lost`.
 
 Take-off works from every mode PX4 can be in on the ground: after a disarm PX4 v1.16 returns to the last mode
 that allows arming (Offboard after an offboard flight), where it refuses to arm without a set-point stream;
-so skyring first asks for Takeoff mode (PX4 accepts that disarmed), then arms, and PX4 climbs at once. What
+so skyring first asks for Hold (PX4 accepts that disarmed), then arms and takes off. What
 PX4 says reaches the state: its own mode name, whether it runs a failsafe (the critical system status of its
 heartbeat) and why, whether it can arm, and why it refused (STATUSTEXT and, where the vehicle serves them,
 PX4 events; vehicles/px4/notices.py).
@@ -903,12 +903,14 @@ class Px4Autopilot:
         from mavsdk.asyncio.plugins.offboard import OffboardError
 
         if command is Command.TAKEOFF:
-            # Takeoff mode first: PX4 accepts it disarmed and allows arming there, whichever mode it was
-            # left in (after a disarm it returns to Offboard, where arming needs a set-point stream); once
-            # armed in Takeoff mode it climbs at once.
+            # Hold first: PX4 accepts it disarmed and allows arming there, whichever mode it was left in
+            # (after a disarm it returns to Offboard, where arming needs a set-point stream). Then arm and
+            # take off, as before: PX4's navigator reads MIS_TAKEOFF_ALT when Takeoff mode starts, and asking
+            # for Takeoff right after setting it has been seen to climb to the old 2.5 m.
             await self._action.set_takeoff_altitude(self._takeoff_altitude_m())
-            await self._action.takeoff()
+            await self._action.hold()
             await self._action.arm()
+            await self._action.takeoff()
         elif command is Command.START_OFFBOARD:
             if self._latest_setpoint is not None:
                 await self._forward(self._latest_setpoint)  # MAVSDK refuses to start without a set-point
