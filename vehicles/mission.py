@@ -468,14 +468,12 @@ class Mission:
             v.autopilot.takeoff(self.takeoff_height_m())
         elif v.phase == Phase.TAKEOFF:
             held = s.in_air and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
-            if held and v.held_since_s is None:
-                v.held_since_s = now_s
-            elif not held:
-                v.held_since_s = None
+            held_since = (v.held_since_s if v.held_since_s is not None else now_s) if held else None
+            v.held_since_s = held_since
             at_height = abs(s.position_m[2] - self.takeoff_height_m()) <= self._params.at_height_tolerance_m
             # A take-off that ends away from the formation height (the autopilot climbed to another one) joins
             # all the same once the autopilot has held for mode_grace_s: the controller brings it to height.
-            if held and (at_height or now_s - v.held_since_s >= self._params.mode_grace_s):
+            if held_since is not None and (at_height or now_s - held_since >= self._params.mode_grace_s):
                 v.phase = Phase.FORMATION
                 v.paused = False
                 v.held_since_s = None

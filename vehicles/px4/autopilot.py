@@ -32,6 +32,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -46,6 +47,15 @@ from vehicles.px4.notices import (
     statustext_severity,
 )
 from vehicles.px4.supervisor import Command, Engagement, Observation, OffboardSupervisor, SupervisorParams
+
+if TYPE_CHECKING:
+    from mavsdk.asyncio import Mavsdk
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.events import EventsAsync
+    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+    from mavsdk.asyncio.plugins.offboard import OffboardAsync
+    from mavsdk.asyncio.plugins.param import ParamAsync
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
 log = logging.getLogger(__name__)
 
@@ -289,6 +299,24 @@ class Px4Status:
     fault: str | None
 
 
+@dataclass
+class _Plugins:
+    """The MAVSDK instance and plugins of one connected vehicle."""
+
+    mavsdk: Mavsdk
+    telemetry: TelemetryAsync
+    action: ActionAsync
+    offboard: OffboardAsync
+    param: ParamAsync
+    events: EventsAsync
+    direct: MavlinkDirectAsync
+
+    def destroy(self) -> None:
+        for plugin in (self.telemetry, self.action, self.offboard, self.param, self.events, self.direct):
+            plugin.destroy()
+        self.mavsdk.destroy()
+
+
 class Px4Autopilot:
     """One PX4 vehicle behind the `Autopilot` protocol. `await connect()`, `set_reference(...)`, `start()`.
 
@@ -312,17 +340,14 @@ class Px4Autopilot:
         self._cache = TelemetryCache()
         self._supervisor = OffboardSupervisor(config.supervisor)
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._mavsdk = None
-        self._system = None
-        self._telemetry = self._action = self._offboard = self._param = None
-        self._events = self._direct = None
+        self._plugins: _Plugins | None = None
         self._tasks: list[asyncio.Task] = []
         self._frame: LocalFrame | None = None
         self._frame_source: str | None = None
         self._origin: GeodeticPoint | None = None
         self._reference: GeodeticPoint | None = None
         self._latest_setpoint: Setpoint | None = None
-        self._setpoint_event: asyncio.Event | None = None
+        self._setpoint_event = asyncio.Event()
         self._rejected_setpoints = 0
         self._failed_commands = 0
         self._fault: str | None = None
@@ -346,24 +371,28 @@ class Px4Autopilot:
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
         self._loop = asyncio.get_running_loop()
-        self._setpoint_event = asyncio.Event()
-        self._mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
         try:
-            await self._mavsdk.add_any_connection(self.url)
+            await mavsdk.add_any_connection(self.url)
         except MavsdkConnectionError as exc:
+            mavsdk.destroy()
             raise Px4Error(f"vehicle {self.vehicle_id}: cannot open {self.url}: {exc}") from exc
-        self._system = await self._mavsdk.first_autopilot(timeout_s=self.config.connect_timeout_s)
-        if self._system is None:
+        system = await mavsdk.first_autopilot(timeout_s=self.config.connect_timeout_s)
+        if system is None:
+            mavsdk.destroy()
             raise Px4Error(
                 f"vehicle {self.vehicle_id}: no autopilot heard on {self.url} within "
                 f"{self.config.connect_timeout_s:.0f} s; is PX4 running and sending to that port?"
             )
-        self._telemetry = TelemetryAsync(self._system)
-        self._action = ActionAsync(self._system)
-        self._offboard = OffboardAsync(self._system)
-        self._param = ParamAsync(self._system)
-        self._events = EventsAsync(self._system)
-        self._direct = MavlinkDirectAsync(self._system)
+        self._plugins = _Plugins(
+            mavsdk=mavsdk,
+            telemetry=TelemetryAsync(system),
+            action=ActionAsync(system),
+            offboard=OffboardAsync(system),
+            param=ParamAsync(system),
+            events=EventsAsync(system),
+            direct=MavlinkDirectAsync(system),
+        )
         self._start_readers()
         await self._wait_healthy()
         await self._set_failsafe_params()
@@ -395,11 +424,11 @@ class Px4Autopilot:
         for name, value in self.config.failsafe_params().items():
             try:
                 if isinstance(value, int):
-                    await self._param.set_param_int(name, value)
-                    readback = await self._param.get_param_int(name)
+                    await self._p.param.set_param_int(name, value)
+                    readback = await self._p.param.get_param_int(name)
                 else:
-                    await self._param.set_param_float(name, value)
-                    readback = await self._param.get_param_float(name)
+                    await self._p.param.set_param_float(name, value)
+                    readback = await self._p.param.get_param_float(name)
             except ParamError as exc:
                 raise Px4Error(f"vehicle {self.vehicle_id}: could not set {name} = {value}: {exc}") from exc
             if not math.isclose(readback, value, abs_tol=1e-4):
@@ -409,7 +438,7 @@ class Px4Autopilot:
         from mavsdk.asyncio.plugins.telemetry import TelemetryError
 
         try:
-            origin = await asyncio.wait_for(self._telemetry.get_gps_global_origin(), timeout=5.0)
+            origin = await asyncio.wait_for(self._p.telemetry.get_gps_global_origin(), timeout=5.0)
         except (TimeoutError, TelemetryError) as exc:
             log.warning(
                 "vehicle %d: no GPS_GLOBAL_ORIGIN (%s); inferring it from a position fix",
@@ -471,19 +500,9 @@ class Px4Autopilot:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         self._tasks.clear()
-        for plugin in (
-            self._telemetry,
-            self._action,
-            self._offboard,
-            self._param,
-            self._events,
-            self._direct,
-        ):
-            if plugin is not None:
-                plugin.destroy()
-        if self._mavsdk is not None:
-            self._mavsdk.destroy()
-            self._mavsdk = None
+        if self._plugins is not None:
+            self._plugins.destroy()
+            self._plugins = None
 
     # ---- the Autopilot protocol ---------------------------------------------------------------------------
     def state(self) -> AutopilotState | None:
@@ -643,6 +662,18 @@ class Px4Autopilot:
         )
 
     # ---- internals: threading -----------------------------------------------------------------------------
+    @property
+    def _p(self) -> _Plugins:
+        """The connected vehicle's MAVSDK plugins (Px4Error before `connect` or after `close`)."""
+        if self._plugins is None:
+            raise Px4Error(f"vehicle {self.vehicle_id}: not connected")
+        return self._plugins
+
+    def _require_loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            raise Px4Error(f"vehicle {self.vehicle_id}: not connected")
+        return self._loop
+
     def _on_loop(self, fn: Callable, *args) -> None:
         """Run fn on the back-end's loop: at once when called on it, else handed over thread-safely."""
         if self._loop is None:
@@ -665,7 +696,7 @@ class Px4Autopilot:
 
     # ---- internals: telemetry readers ---------------------------------------------------------------------
     def _start_readers(self) -> None:
-        t = self._telemetry
+        t, direct, events = self._p.telemetry, self._p.direct, self._p.events
         streams = {
             "position_velocity_ned": (t.subscribe_position_velocity_ned, self._on_position_velocity_ned),
             "position": (t.subscribe_position, self._on_position),
@@ -678,15 +709,14 @@ class Px4Autopilot:
             "home": (t.subscribe_home, self._on_home),
             "raw_gps": (t.subscribe_raw_gps, self._on_raw_gps),
             "status_text": (t.subscribe_status_text, self._on_status_text),
-            "heartbeat": (lambda: self._direct.subscribe_message("HEARTBEAT"), self._on_heartbeat),
-            "events": (self._events.subscribe_events, self._on_event),
-            "arming_checks": (self._events.subscribe_health_and_arming_checks, self._on_arming_checks),
+            "heartbeat": (lambda: direct.subscribe_message("HEARTBEAT"), self._on_heartbeat),
+            "events": (events.subscribe_events, self._on_event),
+            "arming_checks": (events.subscribe_health_and_arming_checks, self._on_arming_checks),
         }
+        loop = self._require_loop()
         for name, (subscribe, apply) in streams.items():
             self._tasks.append(
-                self._loop.create_task(
-                    self._read(name, subscribe, apply), name=f"px4-{self.vehicle_id}-{name}"
-                )
+                loop.create_task(self._read(name, subscribe, apply), name=f"px4-{self.vehicle_id}-{name}")
             )
 
     async def _read(self, name: str, subscribe: Callable, apply: Callable) -> None:
@@ -864,6 +894,15 @@ class Px4Autopilot:
                 command = self._supervisor.step(self._observe())
                 if self._supervisor.released and was is not Engagement.RELEASED:
                     log.warning("vehicle %d: %s", self.vehicle_id, self._supervisor.released_reason)
+                if self._supervisor.failsafe_landing and was is not Engagement.LANDING:
+                    stall = self._supervisor.stall_s
+                    log.warning(
+                        "vehicle %d: landing: %s",
+                        self.vehicle_id,
+                        f"the ground station stalled {stall:.1f} s, PX4 runs its offboard-loss failsafe"
+                        if stall is not None
+                        else "PX4 reported a failsafe it has since left",
+                    )
                 if command is not None:
                     self._executing = True
                     try:
@@ -907,21 +946,21 @@ class Px4Autopilot:
             # (after a disarm it returns to Offboard, where arming needs a set-point stream). Then arm and
             # take off, as before: PX4's navigator reads MIS_TAKEOFF_ALT when Takeoff mode starts, and asking
             # for Takeoff right after setting it has been seen to climb to the old 2.5 m.
-            await self._action.set_takeoff_altitude(self._takeoff_altitude_m())
-            await self._action.hold()
-            await self._action.arm()
-            await self._action.takeoff()
+            await self._p.action.set_takeoff_altitude(self._takeoff_altitude_m())
+            await self._p.action.hold()
+            await self._p.action.arm()
+            await self._p.action.takeoff()
         elif command is Command.START_OFFBOARD:
             if self._latest_setpoint is not None:
                 await self._forward(self._latest_setpoint)  # MAVSDK refuses to start without a set-point
-            await self._offboard.start()
+            await self._p.offboard.start()
         elif command is Command.HOLD:
             try:
-                await self._offboard.stop()  # stops MAVSDK's 20 Hz re-sending, then Hold
+                await self._p.offboard.stop()  # stops MAVSDK's 20 Hz re-sending, then Hold
             except OffboardError:
-                await self._action.hold()
+                await self._p.action.hold()
         elif command is Command.LAND:
-            await self._action.land()
+            await self._p.action.land()
 
     def _takeoff_altitude_m(self) -> float:
         """MIS_TAKEOFF_ALT (above home) that brings the vehicle to the requested team-frame height. Home
@@ -956,10 +995,13 @@ class Px4Autopilot:
     async def _forward(self, setpoint: Setpoint) -> None:
         from mavsdk.asyncio.plugins.offboard import PositionNedYaw, VelocityNedYaw
 
-        ned = ned_setpoint(setpoint, self._frame)
+        frame = self._frame
+        if frame is None:
+            raise Px4Error(f"vehicle {self.vehicle_id}: not placed in the team frame yet")
+        ned = ned_setpoint(setpoint, frame)
         n, e, d = (float(x) for x in ned.position_ned_m)
         vn, ve, vd = (float(x) for x in ned.velocity_ned_mps)
-        await self._offboard.set_position_velocity_ned(
+        await self._p.offboard.set_position_velocity_ned(
             PositionNedYaw(n, e, d, ned.yaw_ned_deg), VelocityNedYaw(vn, ve, vd, ned.yaw_ned_deg)
         )
 

@@ -341,6 +341,7 @@ class OffboardSupervisor:
         if (
             self._fresh(obs.now_s)
             and not obs.link_lost
+            and self._stream_start_s is not None
             and obs.now_s - max(self._stream_start_s, self._engaged_at_s) >= self.params.prestream_s
             and (self._last_command is not Command.START_OFFBOARD or self._retry_time(obs.now_s))
         ):
@@ -377,7 +378,8 @@ class OffboardSupervisor:
         if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD)):
             self._release(obs)
             return None
-        if self._fresh(obs.now_s) and self._last_setpoint_s > self._last_command_s:
+        last = self._last_setpoint_s
+        if self._fresh(obs.now_s) and last is not None and last > self._last_command_s:
             self._engage(obs)  # set-points after the hold: follow them again
             return None
         if self._due_retry(Command.HOLD, obs):
