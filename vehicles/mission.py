@@ -2,23 +2,19 @@
 PX4 vehicles). Backend-agnostic: it talks to vehicles only through the `Autopilot` protocol, to the world
 through `World` and to the radio through `Links`.
 
-It holds one agent per vehicle, the operator's formation parameters, static and virtual obstacles, and a phase
-machine per vehicle:
+It holds the operator's formation parameters, static and virtual obstacles, and one `VehiclePilot` per vehicle
+(`vehicles/pilot.py`: its agent and its phase machine, the same one an onboard agent process runs alone):
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
     IDLE, airborne --(the operator starts the formation or releases it)--> FORMATION
     TAKEOFF / FORMATION --(the autopilot lands or returns it by itself)--> LANDING
 
-A MAV that is landing or landed has left formation control: it publishes plans marked not-in-formation (then
-none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. The
-formation roster (the slots teammates space for) holds only vehicles that are airborne, heard, and flown by
-skyring: one on the ground (e.g. its autopilot refused to arm), one a pilot took, or one the autopilot flies
-in its own failsafe (Land, Hold, Return) is left out, and one the autopilot lands by itself is landing (its
-failsafe's landing stands: once down it waits for release). A vehicle found airborne when the mission starts
-(an earlier ground station flew it) is adopted as it is: avoided, not steered, until the operator starts the
-formation or releases it. Operator actions are methods that take effect at the next `step` (within one control
-period); a refused action raises `MissionError` with a message a person can act on and changes nothing.
+The roster holds only the vehicles airborne, heard and flown by skyring (vehicles/pilot.py). A MAV that is
+landing or landed has left formation control: it publishes plans marked not-in-formation (then none once on
+the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. Operator actions are
+methods that take effect at the next `step` (within one control period); a refused action raises
+`MissionError` with a message a person can act on and changes nothing.
 """
 
 from __future__ import annotations
@@ -27,77 +23,36 @@ import math
 import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from enum import StrEnum
 
-from controller.messages import HorizonPlan, Obstacle, PersonEstimate, SolveStatus
+from controller.messages import Obstacle
 from controller.params import ControllerParams, FormationParams
-from controller.tracker import TrackerStats
-from vehicles.agent import Agent, AgentCounters, AgentInputs, AgentOutputs, AgentParams, AgentRole
-from vehicles.autopilot import Autopilot, AutopilotState, FlightMode, Setpoint
+from vehicles.agent import Agent, AgentInputs, AgentParams
+from vehicles.autopilot import Autopilot
 from vehicles.link_loss import silent_vehicle_obstacle
 from vehicles.links import Links
-from vehicles.world import PERSON_CENTRE_HEIGHT_M, PersonTruth, World
+from vehicles.pilot import (
+    FLYING_PHASES,
+    AgentLink,
+    MissionError,
+    MissionParams,
+    Phase,
+    VehiclePilot,
+    VehicleSnapshot,
+    roster_slots,
+    takeoff_height_m,
+)
+from vehicles.world import PersonTruth, World
 
-
-class Phase(StrEnum):
-    """Where a vehicle is in the mission."""
-
-    IDLE = "idle"
-    TAKEOFF = "takeoff"
-    FORMATION = "formation"
-    LANDING = "landing"
-    LANDED = "landed"
-
-
-class MissionError(ValueError):
-    """An operator action the mission refused; the message says why and what to do."""
-
-
-@dataclass(frozen=True)
-class MissionParams:
-    """takeoff_height_m: None = the formation height (h_des above a person standing on the ground) clamped
-    0.5 m inside the MPC's height bounds; at_height_tolerance_m: takeoff is done within this of the target;
-    retry_s: a takeoff or land command that shows no effect is re-sent after this long (lost commands over a
-    real link); slot_offset_rad: bearing of roster slot 0 about the person (slot k at offset + 2 pi k / K);
-    mode_grace_s: how long an autopilot's mode reading may lag a command (PX4 reports its mode once a second):
-    a Land read sooner after a take-off command is the old mode, not the autopilot landing the vehicle."""
-
-    takeoff_height_m: float | None = None
-    at_height_tolerance_m: float = 0.5
-    retry_s: float = 1.0
-    slot_offset_rad: float = 0.0
-    mode_grace_s: float = 2.0
-
-
-@dataclass(frozen=True, eq=False)
-class VehicleSnapshot:
-    """Everything a display needs about one vehicle.
-
-    autopilot: latest telemetry; plan: the latest horizon plan; person: this MAV's fused estimate (its
-    position_cov_m2 is the ellipsoid); setpoint: last set-point sent; status/solver_time_s: the controller's
-    last result; tick_s: wall time of the last agent tick (None without a clock); link_age_s: age of the
-    telemetry; teammates_known: teammates whose plans are fresh; used_slot: steering to the roster slot
-    because teammates are unheard; fault: last fault line; in_formation: in the formation roster and flown by
-    formation control now (False while its autopilot runs a failsafe, a pilot has it, its link is lost, or it
-    is not airborne).
-    """
-
-    vehicle_id: int
-    phase: Phase
-    autopilot: AutopilotState | None
-    plan: HorizonPlan | None
-    person: PersonEstimate | None
-    setpoint: Setpoint | None
-    status: SolveStatus | None
-    solver_time_s: float
-    tick_s: float | None
-    link_age_s: float | None
-    teammates_known: int
-    used_slot: bool
-    fault: str | None
-    tracker: TrackerStats
-    counters: AgentCounters
-    in_formation: bool = False
+__all__ = [
+    "AgentLink",
+    "Mission",
+    "MissionCounters",
+    "MissionError",
+    "MissionParams",
+    "MissionSnapshot",
+    "Phase",
+    "VehicleSnapshot",
+]
 
 
 @dataclass(frozen=True)
@@ -128,20 +83,20 @@ class MissionSnapshot:
     counters: MissionCounters
 
 
-@dataclass
-class _Vehicle:
-    autopilot: Autopilot
-    agent: Agent
-    phase: Phase = Phase.IDLE
-    command_s: float = -math.inf
-    last: AgentOutputs | None = None
-    last_setpoint: Setpoint | None = None
-    tick_s: float | None = None
-    paused: bool = False
-    state: AutopilotState | None = None
-    in_roster: bool = False
-    resume: bool = False  # airborne and not flown by skyring: the operator asked for it to join
-    held_since_s: float | None = None  # taking off: when the autopilot was first seen holding
+def team_counters(vehicles: Sequence[VehicleSnapshot], *, rejected_actions: int) -> MissionCounters:
+    """The team's rejected-input counters summed over its vehicles' snapshots."""
+    totals = dict.fromkeys(
+        ("rejected_detections", "rejected_messages", "controller_errors", "braking_ticks"), 0
+    )
+    for v in vehicles:
+        tracker, counters = v.tracker, v.counters
+        totals["rejected_detections"] += tracker.gated + tracker.stale + tracker.invalid
+        totals["rejected_messages"] += counters.rejected_messages + (
+            v.agent.rejected_messages if v.agent is not None else 0
+        )
+        totals["controller_errors"] += counters.controller_errors
+        totals["braking_ticks"] += counters.braking_ticks
+    return MissionCounters(rejected_actions=rejected_actions, **totals)
 
 
 class Mission:
@@ -166,22 +121,23 @@ class Mission:
         ids = [a.vehicle_id for a in autopilots]
         if not ids or len(set(ids)) != len(ids):
             raise ValueError("a mission needs at least one autopilot, with unique vehicle ids")
+        self._params = params or MissionParams()
         self._vehicles = {
-            a.vehicle_id: _Vehicle(
+            a.vehicle_id: VehiclePilot(
                 autopilot=a,
                 agent=Agent(vehicle_id=a.vehicle_id, params=controller_params, agent_params=agent_params),
+                params=self._params,
+                clock=clock,
             )
             for a in sorted(autopilots, key=lambda a: a.vehicle_id)
         }
         self._world = world
         self._links = links
         self._cparams = controller_params
-        self._params = params or MissionParams()
         self._check_formation(formation)
         self._formation = formation
         self._virtual: dict[str, Obstacle] = {}
         self._enabled = bool(formation_enabled)
-        self._clock = clock
         self._now = 0.0
         self._rejected_actions = 0
         for o in virtual_obstacles:
@@ -212,10 +168,9 @@ class Mission:
         return self._vehicle(vehicle_id).phase
 
     def takeoff_height_m(self) -> float:
-        if self._params.takeoff_height_m is not None:
-            return self._params.takeoff_height_m
-        lo, hi = self._cparams.mpc.position_min_m[2] + 0.5, self._cparams.mpc.position_max_m[2] - 0.5
-        return min(max(self._formation.h_des_m + PERSON_CENTRE_HEIGHT_M, lo), hi)
+        return takeoff_height_m(
+            params=self._params, controller_params=self._cparams, formation=self._formation
+        )
 
     # ---- operator actions ---------------------------------------------------------------------------------
     def set_formation(self, formation: FormationParams) -> None:
@@ -249,52 +204,36 @@ class Mission:
     def land(self, vehicle_id: int) -> None:
         """Land one vehicle now; it leaves formation control until released."""
         v = self._vehicle(vehicle_id)
-        if v.phase in (Phase.IDLE, Phase.LANDED):
-            self._refuse(f"vehicle {vehicle_id} is on the ground already ({v.phase.value})")
-        self._start_landing(v)
+        try:
+            v.land(self._now)
+        except MissionError:
+            self._rejected_actions += 1
+            raise
 
     def land_all(self) -> None:
         """Land every vehicle that is taking off or flying."""
         for v in self._vehicles.values():
-            if v.phase in (Phase.TAKEOFF, Phase.FORMATION):
-                self._start_landing(v)
+            if v.phase in FLYING_PHASES:
+                v.start_landing(self._now)
 
     def release(self, vehicle_id: int) -> None:
-        """Give a vehicle back to the formation: a landed one takes off again (when formation is enabled); an
-        airborne one skyring does not fly (adopted, or a pilot gave it back) joins it. Refused while the
-        vehicle's autopilot runs a failsafe: its decision stands until it ends or the vehicle is down."""
+        """Give a landed vehicle back to the formation: it takes off again (when formation is enabled); or an
+        airborne one skyring does not fly: it joins (`VehiclePilot.release`)."""
         v = self._vehicle(vehicle_id)
-        s = v.state
-        if s is not None and s.failsafe:
-            why = f": {s.failsafe_reason}" if s.failsafe_reason else ""
-            self._refuse(
-                f"vehicle {vehicle_id} is in its autopilot's failsafe ({s.autopilot_mode or s.mode.value}"
-                f"{why}); it can rejoin once the failsafe ends or it has landed"
-            )
-        if v.phase == Phase.LANDED:
-            v.phase = Phase.IDLE
-            return
-        airborne_idle = v.phase == Phase.IDLE and s is not None and s.in_air
-        taken = v.phase in (Phase.TAKEOFF, Phase.FORMATION) and s is not None and s.in_air and s.released
-        if not (airborne_idle or taken):
-            self._refuse(
-                f"vehicle {vehicle_id} is {v.phase.value}; only a landed vehicle, or an airborne one skyring "
-                "does not fly, can be released"
-            )
-        v.resume = True
-        if taken:
-            v.command_s = self._now
-            v.autopilot.takeoff(self.takeoff_height_m())  # re-engages an airborne vehicle
+        try:
+            v.release()
+        except MissionError:
+            self._rejected_actions += 1
+            raise
 
     def set_formation_enabled(self, enabled: bool) -> None:
         """Start (True) or stop (False) formation control; stopped MAVs hold position, idle ones stay down.
-        Starting it also brings in the airborne vehicles skyring found flying (adopted) once their autopilot
-        lets it."""
+        Starting it also brings in the airborne vehicles found flying (adopted) once their autopilot lets
+        them."""
         self._enabled = bool(enabled)
         if self._enabled:
             for v in self._vehicles.values():
-                if v.phase == Phase.IDLE and v.state is not None and v.state.in_air:
-                    v.resume = True
+                v.formation_started()
 
     # ---- the control tick ---------------------------------------------------------------------------------
     def step(self, now_s: float) -> None:
@@ -304,107 +243,61 @@ class Mission:
         self._now = now_s
         self._world.advance(now_s)
         obstacles = self.obstacles()
+        height = self.takeoff_height_m()
         for v in self._vehicles.values():
-            v.state = v.autopilot.state()
-            self._advance_phase(v, now_s)
+            v.observe(now_s, enabled=self._enabled, takeoff_height_m=height)
         # A vehicle whose link is lost gets no agent tick (nothing would reach it) and leaves the roster; its
         # teammates avoid it around its last plan, the wider the longer it is silent (vehicles/link_loss.py).
-        silent = {vid for vid, v in self._vehicles.items() if v.state is not None and v.state.link_lost}
+        silent = [v for v in self._vehicles.values() if v.silent and v.state is not None]
         obstacles += tuple(
             silent_vehicle_obstacle(
-                state=self._vehicles[vid].state,
-                now_s=now_s,
-                plan=self._vehicles[vid].last.plan if self._vehicles[vid].last is not None else None,
+                state=v.state, now_s=now_s, plan=v.last.plan if v.last is not None else None
             )
-            for vid in sorted(silent)
+            for v in silent
+            if v.state is not None
         )
-        roster = [vid for vid, v in self._vehicles.items() if vid not in silent and self._rostered(v)]
+        slots = roster_slots(
+            [vid for vid, v in self._vehicles.items() if v.in_roster], offset_rad=self._params.slot_offset_rad
+        )
         for vid, v in self._vehicles.items():
-            v.in_roster = vid in roster
-        k = len(roster)
-        offset = self._params.slot_offset_rad
-        slots = tuple((vid, offset + 2.0 * math.pi * i / k) for i, vid in enumerate(roster))
-        for vid, v in self._vehicles.items():
-            if vid in silent:
+            if v.silent:
                 self._world.detections(vid)  # stale frames and messages are dropped, not queued up
                 self._links.receive(now_s, vid)
                 continue
-            role = self._role(v)
             inputs = AgentInputs(
                 own=v.state,
                 detections=self._world.detections(vid),
                 received=self._links.receive(now_s, vid),
                 obstacles=obstacles,
                 formation=self._formation,
-                role=role,
+                role=v.role(enabled=self._enabled),
                 roster=slots,
             )
-            t0 = self._clock() if self._clock is not None else None
-            out = v.agent.tick(now_s, inputs)
-            if t0 is not None:
-                v.tick_s = self._clock() - t0
-            v.last = out
-            if out.setpoint is not None and role == AgentRole.FORMATION:
-                v.autopilot.send_setpoint(out.setpoint)
-                v.last_setpoint = out.setpoint
+            out = v.tick(now_s, inputs)
             for msg in out.outbox:
                 self._links.send(now_s, vid, msg)
 
     def snapshot(self) -> MissionSnapshot:
         """The mission now, for displays, logs and metrics."""
-        vehicles = []
-        totals = dict.fromkeys(
-            ("rejected_detections", "rejected_messages", "controller_errors", "braking_ticks"), 0
-        )
-        k = 0
-        for vid, v in self._vehicles.items():
-            out = v.last
-            state = v.state
-            tracker = out.tracker if out is not None else TrackerStats()
-            counters = out.counters if out is not None else AgentCounters()
-            control = out.control if out is not None else None
-            k += v.in_roster
-            totals["rejected_detections"] += tracker.gated + tracker.stale + tracker.invalid
-            totals["rejected_messages"] += counters.rejected_messages
-            totals["controller_errors"] += counters.controller_errors
-            totals["braking_ticks"] += counters.braking_ticks
-            vehicles.append(
-                VehicleSnapshot(
-                    vehicle_id=vid,
-                    phase=v.phase,
-                    autopilot=state,
-                    plan=out.plan if out is not None else None,
-                    person=out.person if out is not None else None,
-                    setpoint=v.last_setpoint,
-                    status=control.status if control is not None else None,
-                    solver_time_s=control.solver_time_s if control is not None else 0.0,
-                    tick_s=v.tick_s,
-                    link_age_s=(self._now - state.stamp_s) if state is not None else None,
-                    teammates_known=out.teammates_known if out is not None else 0,
-                    used_slot=out.used_slot if out is not None else False,
-                    fault=out.fault if out is not None else None,
-                    tracker=tracker,
-                    counters=counters,
-                    in_formation=v.in_roster and self._role(v) == AgentRole.FORMATION,
-                )
-            )
+        vehicles = tuple(v.snapshot(self._now) for v in self._vehicles.values())
         return MissionSnapshot(
             stamp_s=self._now,
-            vehicles=tuple(vehicles),
+            vehicles=vehicles,
             person_truth=self._world.person_truth(),
             obstacles=self.obstacles(),
             virtual_obstacle_ids=tuple(self._virtual),
             formation=self._formation,
             formation_enabled=self._enabled,
-            slot_count=k,
-            counters=MissionCounters(rejected_actions=self._rejected_actions, **totals),
+            slot_count=sum(v.in_roster for v in self._vehicles.values()),
+            counters=team_counters(vehicles, rejected_actions=self._rejected_actions),
         )
 
     # ---- internals ----------------------------------------------------------------------------------------
-    def _vehicle(self, vehicle_id: int) -> _Vehicle:
+    def _vehicle(self, vehicle_id: int) -> VehiclePilot:
         v = self._vehicles.get(int(vehicle_id)) if isinstance(vehicle_id, numbers.Integral) else None
         if v is None:
             self._refuse(f"no vehicle with id {vehicle_id!r}; vehicles are {list(self._vehicles)}")
+            raise AssertionError("unreachable")
         return v
 
     def _refuse(self, message: str) -> None:
@@ -418,89 +311,3 @@ class Mission:
             value = getattr(formation, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise MissionError(f"{name} must be a positive finite number of metres, got {value!r}")
-
-    def _start_landing(self, v: _Vehicle) -> None:
-        v.phase = Phase.LANDING
-        v.command_s = self._now
-        v.autopilot.land()
-
-    @staticmethod
-    def _autopilot_has_it(s: AutopilotState) -> bool:
-        """The autopilot flies the vehicle by itself (its failsafe, or a pilot): not skyring's to steer."""
-        return s.released or s.failsafe
-
-    @staticmethod
-    def _leaving(s: AutopilotState) -> bool:
-        """The autopilot is taking the vehicle down or home (Land, Return), whoever asked."""
-        return s.in_air and s.mode in (FlightMode.LAND, FlightMode.RETURN)
-
-    def _rostered(self, v: _Vehicle) -> bool:
-        """In the formation roster: taking off or in formation, airborne, and flown by skyring."""
-        s = v.state
-        return (
-            v.phase in (Phase.TAKEOFF, Phase.FORMATION)
-            and s is not None
-            and s.in_air
-            and not self._autopilot_has_it(s)
-            and not self._leaving(s)
-        )
-
-    def _advance_phase(self, v: _Vehicle, now_s: float) -> None:
-        s = v.state
-        if s is None:
-            return
-        retry = now_s - v.command_s >= self._params.retry_s
-        settled = now_s - v.command_s >= self._params.mode_grace_s
-        if v.phase in (Phase.TAKEOFF, Phase.FORMATION) and self._leaving(s) and settled:
-            v.phase = Phase.LANDING  # its autopilot lands (or returns) it: that landing stands
-            v.command_s = now_s
-        elif v.phase == Phase.IDLE and s.in_air:
-            # Found flying (adopted): avoided, not steered, until the operator asks for it and PX4 lets go.
-            if v.resume and self._enabled and not s.link_lost and not s.failsafe and not self._leaving(s):
-                v.phase = Phase.FORMATION
-                v.paused = False
-                v.command_s = now_s
-                v.autopilot.takeoff(self.takeoff_height_m())  # re-engages an airborne vehicle
-        elif v.phase == Phase.IDLE and self._enabled:
-            v.resume = False
-            v.phase = Phase.TAKEOFF
-            v.command_s = now_s
-            v.autopilot.takeoff(self.takeoff_height_m())
-        elif v.phase == Phase.TAKEOFF:
-            held = s.in_air and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
-            held_since = (v.held_since_s if v.held_since_s is not None else now_s) if held else None
-            v.held_since_s = held_since
-            at_height = abs(s.position_m[2] - self.takeoff_height_m()) <= self._params.at_height_tolerance_m
-            # A take-off that ends away from the formation height (the autopilot climbed to another one) joins
-            # all the same once the autopilot has held for mode_grace_s: the controller brings it to height.
-            if held_since is not None and (at_height or now_s - held_since >= self._params.mode_grace_s):
-                v.phase = Phase.FORMATION
-                v.paused = False
-                v.held_since_s = None
-            elif retry and s.mode != FlightMode.TAKEOFF and not s.in_air:
-                v.command_s = now_s
-                v.autopilot.takeoff(self.takeoff_height_m())
-        elif v.phase == Phase.FORMATION:
-            if not s.in_air and not s.armed:
-                v.phase = Phase.LANDED
-            elif not self._enabled and not v.paused:
-                v.paused = True
-                v.autopilot.hold()
-            elif self._enabled:
-                v.paused = False
-        elif v.phase == Phase.LANDING:
-            if not s.in_air:
-                v.phase = Phase.LANDED
-            elif retry and s.mode not in (FlightMode.LAND, FlightMode.RETURN, FlightMode.MANUAL):
-                v.command_s = now_s
-                v.autopilot.land()  # e.g. PX4 ended its failsafe landing by itself: it still lands
-
-    def _role(self, v: _Vehicle) -> AgentRole:
-        s = v.state
-        # A pilot or the autopilot's own failsafe has it: avoid it, do not steer it.
-        taken = s is not None and (self._autopilot_has_it(s) or self._leaving(s))
-        if v.phase == Phase.FORMATION and self._enabled and not taken:
-            return AgentRole.FORMATION
-        if s is not None and s.in_air and v.phase != Phase.LANDED:
-            return AgentRole.AIRBORNE
-        return AgentRole.GROUND

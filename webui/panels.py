@@ -32,10 +32,32 @@ REFUSED_FLAG = "ARMING REFUSED"  # the autopilot refused the take-off; its reaso
 HELD_FLAG = "CANNOT TAKE OFF HERE"  # the pre-take-off checks (person keep-out, d_min) refuse it
 
 
+AGENT_LOST_FLAG = "AGENT LOST"
+SKEW_FLAG = "CLOCK SKEW"
+
+
+def agent_line(vehicle: VehicleView) -> str:
+    """The card's line about a networked agent: lost, clock skew, the latest command's outcome per vehicle."""
+    a = vehicle.agent
+    if a is None:
+        return ""
+    parts = [f"**{AGENT_LOST_FLAG}** ({a.age_s:.1f} s)" if a.lost else "agent ok"]
+    if a.station_lost:
+        parts.append("it lost the station")
+    if a.clock_offset_s is not None:
+        skew = f" **{SKEW_FLAG}**" if a.clock_skew else ""
+        parts.append(f"clock {a.clock_offset_s * 1e3:+.0f} ms{skew}")
+    if a.commands:
+        command_id, action, outcome, message = a.commands[-1]
+        parts.append(f"cmd {command_id} {action}: {outcome}" + (f" ({message})" if message else ""))
+    return " · ".join(parts)
+
+
 def vehicle_card(vehicle: VehicleView) -> str:
     """Markdown for one vehicle's card: phase, the autopilot's own mode, armed, link age (flagged when
-    stale), solver, battery; then, when there is one, the autopilot's failsafe and why, why it refused to
-    arm, and why the ground station would not let it take off where it stands."""
+    stale), solver, battery; for an onboard agent its link, clock and last command; then, when there is one,
+    the autopilot's failsafe and why, why it refused to arm, and why the ground station would not let it take
+    off where it stands."""
     link = f"{vehicle.link_age_s:.1f} s" + (f" **{STALE_FLAG}**" if vehicle.link_stale else "")
     solver = "-" if vehicle.solver_time_s is None else f"{vehicle.solver_time_s * 1e3:.2f} ms"
     battery = "unknown" if vehicle.battery_fraction is None else f"{vehicle.battery_fraction * 100:.0f} %"
@@ -48,6 +70,8 @@ def vehicle_card(vehicle: VehicleView) -> str:
         f"{'in air' if vehicle.in_air else 'on ground'}",
         f"link {link} · solver {solver}{status} · battery {battery}",
     ]
+    if vehicle.agent is not None:
+        lines.append(agent_line(vehicle))
     if vehicle.failsafe:
         lines.append(f"**{FAILSAFE_FLAG}**: {vehicle.failsafe_reason or 'the autopilot runs its failsafe'}")
     if vehicle.arming_refusal:
