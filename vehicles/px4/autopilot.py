@@ -354,7 +354,8 @@ class Px4Autopilot:
         self._refused_at_s: float | None = None  # when PX4 last refused a take-off (arming) skyring asked for
         self._refusal_fallback = ""
         self._failsafe_reports_seen = 0
-        self._last_step_s: float | None = None  # when the supervisor loop last went round
+        self._last_beat_s: float | None = None  # when the event loop last let `_beat` run
+        self._loop_gap_s = 0.0  # the longest the event loop stalled since the supervisor last looked
         self._executing = False
         self._stamp_clock: Callable[[], float] | None = None
 
@@ -478,6 +479,7 @@ class Px4Autopilot:
         if self._frame is None or self._loop is None:
             raise Px4Error(f"vehicle {self.vehicle_id}: connect and set_reference before start")
         name = f"px4-{self.vehicle_id}"
+        self._tasks.append(self._loop.create_task(self._beat(), name=f"{name}-beat"))
         self._tasks.append(self._loop.create_task(self._supervise(), name=f"{name}-supervisor"))
         self._tasks.append(self._loop.create_task(self._stream(), name=f"{name}-stream"))
 
@@ -569,22 +571,25 @@ class Px4Autopilot:
             arming_refusal=refusal,
         )
 
+    def _loop_stall_s(self, now: float) -> float:
+        """The longest the event loop stalled since the supervisor last looked, counting one in progress."""
+        running = 0.0 if self._last_beat_s is None else now - self._last_beat_s
+        return max(self._loop_gap_s, running)
+
     def _stalled(self, now: float) -> bool:
-        """The supervisor loop has not run past stall_land_after_s while following: the whole ground station
-        stalled, so PX4 runs its offboard-loss failsafe (the supervisor lands it on its next step)."""
+        """The event loop stalled past stall_land_after_s while skyring flew the vehicle in offboard: the
+        whole ground station stalled, so PX4 runs its offboard-loss failsafe (the supervisor lands it next
+        step)."""
         limit = self.config.supervisor.stall_land_after_s
-        return (
-            self._supervisor.engagement is Engagement.FOLLOWING
-            and self._last_step_s is not None
-            and now - self._last_step_s > limit
-        )
+        offboard = (Engagement.FOLLOWING, Engagement.ENGAGING)
+        return self._supervisor.engagement in offboard and self._loop_stall_s(now) > limit
 
     def _failsafe_landing_reason(self, now: float) -> str:
         """Why a vehicle lands for PX4's failsafe that PX4 itself no longer reports (cache lock held)."""
         c = self._cache
         stall = self._supervisor.stall_s
-        if stall is None and self._last_step_s is not None and self._stalled(now):
-            stall = now - self._last_step_s
+        if stall is None and self._stalled(now):
+            stall = self._loop_stall_s(now)
         said = (
             c.notices.failsafe_reason(since_s=c.failsafe_report_s)
             if c.failsafe_report_s is not None
@@ -874,7 +879,8 @@ class Px4Autopilot:
                 self._refused_at_s = None  # it flies: the last refusal is history
             reported = c.failsafe_reports > self._failsafe_reports_seen
             self._failsafe_reports_seen = c.failsafe_reports
-            stalled = 0.0 if self._last_step_s is None else now - self._last_step_s
+            stalled = self._loop_stall_s(now)
+            self._loop_gap_s = 0.0
             return Observation(
                 now_s=now,
                 mode=skyring_mode(c.px4_mode, armed=c.armed, in_air=c.in_air),
@@ -886,6 +892,18 @@ class Px4Autopilot:
                 can_arm=self._can_arm_locked(),
                 stalled_s=stalled,
             )
+
+    async def _beat(self) -> None:
+        """Measure how long the event loop stalls (the whole process frozen, or starved): a gap longer than
+        PX4's offboard-loss timeout means MAVSDK's set-points stopped too. Its own task, so a command the
+        supervisor awaits is not taken for a stall."""
+        period = self.config.supervise_period_s
+        while True:
+            now = self._clock()
+            if self._last_beat_s is not None:
+                self._loop_gap_s = max(self._loop_gap_s, now - self._last_beat_s - period)
+            self._last_beat_s = now
+            await asyncio.sleep(period)
 
     async def _supervise(self) -> None:
         while True:
@@ -914,7 +932,6 @@ class Px4Autopilot:
             except Exception as exc:  # the supervisor must outlive any single failure
                 self._fault = f"supervisor: {exc}"
                 log.exception("vehicle %d: supervisor step failed", self.vehicle_id)
-            self._last_step_s = self._clock()  # (a command's wait is not a stall)
             await asyncio.sleep(self.config.supervise_period_s)
 
     async def _execute(self, command: Command) -> None:
