@@ -86,7 +86,8 @@ def test_a_mav_whose_takeoff_is_refused_leaves_the_roster_and_its_teammates_spac
     snap = mission.snapshot()
     assert snap.slot_count == 2
     assert [v.in_formation for v in snap.vehicles] == [True, True, False]
-    assert snap.vehicles[2].phase == Phase.TAKEOFF and not snap.vehicles[2].autopilot.in_air
+    grounded = snap.vehicles[2].autopilot
+    assert snap.vehicles[2].phase == Phase.TAKEOFF and grounded is not None and not grounded.in_air
     xy = np.array([a.sim.true_position_m[:2] for a in told[:2]])
     assert spacing_error_deg(positions_xy_m=xy, person_xy_m=np.zeros(2)) < 10.0  # pi apart
 
@@ -135,7 +136,8 @@ def test_a_mav_found_flying_is_avoided_not_steered_until_the_operator_starts_the
     up.sim.takeoff(8.9)
     t = run(mission, 0.0, 8.0)
     snap = mission.snapshot()
-    assert snap.vehicles[0].phase == Phase.IDLE and snap.vehicles[0].autopilot.in_air
+    found = snap.vehicles[0].autopilot
+    assert snap.vehicles[0].phase == Phase.IDLE and found is not None and found.in_air
     assert snap.vehicles[0].plan is not None and not snap.vehicles[0].plan.in_formation  # teammates avoid it
     assert up.takeoffs == 0 and [a.takeoffs for a in told[1:]] == [0, 0]
     mission.set_formation_enabled(True)

@@ -33,8 +33,13 @@ def grounded_station(flight_log: FlightLog | None = None) -> GroundStation:
 
 def distances_to_person(station: GroundStation) -> dict[int, float]:
     snap = station.snapshot()
+    assert snap.person_truth is not None
     person = snap.person_truth.position_m[:2]
-    return {v.vehicle_id: float(np.hypot(*(v.autopilot.position_m[:2] - person))) for v in snap.vehicles}
+    return {
+        v.vehicle_id: float(np.hypot(*(v.autopilot.position_m[:2] - person)))
+        for v in snap.vehicles
+        if v.autopilot is not None
+    }
 
 
 async def test_start_is_refused_naming_each_mav_inside_the_keep_out_and_nothing_changes():
