@@ -1,13 +1,13 @@
 """One MAV's formation controller: person estimate, teammates' plans and obstacles in; horizon plan and
 way-point out.
 
-Per step (paper Sec. III, DESIGN.md "One MAV's loop", steps 3-4): check every input; start from the previous
+Per step (paper Sec. III, docs/architecture.md#one-control-tick): check every input; start from the previous
 plan's state at `now` on a leash to the measured state (reference.py); compute the external inputs f(0..N)
 on the previous plan (fields.py); aim at the terminal reference moved by what the inputs add (pass-through);
 solve the MPC (mpc.py); publish the plan; send its state `waypoint_step` ahead with the yaw facing the person.
 
-Methods (METHOD.md "Baselines"): `active` (every input), `dqmpc` (teammate and obstacle repulsion only, with
-its thresholds 1 m / 4 m), `price` (MPC to the d_des circle point with zero terminal velocity, weights
+Methods (docs/method.md#baselines): `active` (every input), `dqmpc` (teammate and obstacle repulsion only,
+with its thresholds 1 m / 4 m), `price` (MPC to the d_des circle point with zero terminal velocity, weights
 1000 / 0.1, no inputs in the MPC, a field added after it, teammates' current positions only; baselines.py).
 
 Bad input never raises and never yields a NaN way-point: a non-finite (or absurdly large) own state, person
@@ -328,7 +328,7 @@ class FormationController:
         return self._obstacle_set
 
     def _own_cov_radius(self, own: VehicleState) -> float:
-        """Eq. 17's r_sigma of our own covariance (cached: it rarely changes)."""
+        """Eq. 15's r_sigma of our own covariance (cached: it rarely changes)."""
         key = own.position_cov_m2.tobytes()
         if key != self._cov_key:
             cov = np.asarray(own.position_cov_m2, dtype=float)

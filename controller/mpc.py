@@ -15,19 +15,10 @@ with c(n) = g ("hover"), f(n) + g ("planned") or 0 ("raw").
 
 Condensed form: the variables are z = [u(0..N) (N+1, 3) | s (6,)] and the states are affine in them,
 x(1..N+1) = h + G u, with h the free response to x(0) and f + g (`predict` with u = 0) and G the
-(6(N+1), 3(N+1)) input-to-state matrix. Measured against the sparse form (states as variables, 150
-variables) on 60 random instances: the sparse form costs less per iteration (4.5 vs 6 us) and re-factorises
-faster after a terminal-weight change (57 vs 87-120 us), but ADMM converges 2-4x slower on it when state
-bounds are active (cold: 90th percentile 1081 vs 560 iterations, 2 of 60 hit the 4000 cap; the condensed
-form solved all within 1625), and warm-started in closed loop it takes 25 iterations against 15.
-Robustness decided.
-
-State bounds are soft because a strong external input can make them infeasible (METHOD.md, pitfall 1). Slack
-layout: one slack per state component (x, y, z, vx, vy, vz) shared over the horizon, an L-infinity penalty:
-6 extra variables instead of 96, and exact (the plan equals the hard-bounded one whenever that exists) as long
-as slack_weight exceeds the summed multipliers of the component's bound rows. The quadratic slack term does
-not change that (its slope at s = 0 is zero) but gives OSQP curvature in s: with a purely linear penalty a
-cold solve took about 1100 iterations even with no bound active, with it about 200.
+(6(N+1), 3(N+1)) input-to-state matrix; chosen over the sparse form because ADMM converged faster and more
+reliably on it (docs/method.md#condensed-form). State bounds are soft, with one slack per state component
+shared over the horizon and an exact penalty, because a strong external input can make them infeasible
+(docs/method.md#soft-state-bounds, docs/method.md#infeasible-qps).
 """
 
 from __future__ import annotations
@@ -47,7 +38,7 @@ PLAUSIBLE_MAGNITUDE = 1.0e6
 
 @dataclass(frozen=True)
 class MpcParams:
-    """MPC horizon, bounds and weights (METHOD.md "The MPC"). ENU, z up.
+    """MPC horizon, bounds and weights (docs/method.md#the-mpc). ENU, z up.
 
     horizon_steps: N (inputs u(0..N), states x(1..N+1)); dt_s: step length.
     Bounds are per axis (x, y, z). input_*_mps2 bound the commanded acceleration u *before* gravity is added

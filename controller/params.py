@@ -19,7 +19,7 @@ from controller.tracker import TrackerParams
 
 
 class Method(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports
-    """Formation method: the paper's (`active`) or one of its two baselines (METHOD.md "Baselines")."""
+    """Formation method: the paper's (`active`) or one of its two baselines (docs/method.md#baselines)."""
 
     ACTIVE = "active"
     DQMPC = "dqmpc"
@@ -40,7 +40,7 @@ class FormationParams:
 
 @dataclass(frozen=True)
 class ControllerParams:
-    """Everything one MAV's controller needs, with the defaults of METHOD.md."""
+    """Everything one MAV's controller needs, with the defaults of docs/method.md."""
 
     method: Method = Method.ACTIVE
     mpc: MpcParams = field(default_factory=MpcParams)

@@ -3,7 +3,7 @@
 Every MAV fuses its own and its teammates' world-frame detections, each with its own covariance
 (measurement.py), in a linear Kalman filter (filterpy) on x = [p (3), v (3)] (ENU, m and m/s).
 
-Motion model (METHOD.md, from the authors' original): the velocity decays exponentially, to
+Motion model (docs/method.md#person-tracker, from the authors' code): the velocity decays exponentially, to
 `velocity_decay_fraction` of itself over `velocity_decay_time_s` (time constant tau = T / ln(1 / fraction),
 1.30 s by default), driven by white noise (an Ornstein-Uhlenbeck velocity). The noise is given as a standard
 deviation per square-root second, sigma_q (m/s/sqrt(s)): over a short dt the velocity's variance grows by
@@ -46,7 +46,7 @@ from controller.messages import Detection, PersonEstimate
 
 @dataclass(frozen=True)
 class TrackerParams:
-    """Motion model, gating and reset of the person tracker (METHOD.md "Person tracker").
+    """Motion model, gating and reset of the person tracker (docs/method.md#person-tracker).
 
     gate_sigma: Mahalanobis distance (3 dof, in sigmas) beyond which a detection is rejected;
     reset_after_s: the track expires after this long without an accepted detection;

@@ -1,4 +1,4 @@
-"""One MAV's onboard loop (DESIGN.md "One MAV's loop"), as a plain object driven by any runner.
+"""One MAV's onboard loop (docs/architecture.md#one-control-tick), as a plain object driven by any runner.
 
 Per tick: fuse the MAV's own new detections and the teammates' received ones in its person-tracker replica,
 keep the teammates' latest horizon plans, run the formation controller on the MAV's own reported state, and
@@ -32,6 +32,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from controller.angles import wrap_angle
 from controller.formation import FormationController
 from controller.messages import (
     ControlOutput,
@@ -333,7 +334,7 @@ class Agent:
             self._search = (now_s, yaw_rad)
         t0, yaw0 = self._search
         self._search = (now_s, yaw0 + self._ap.search_yaw_rate_radps * (now_s - t0))
-        return (self._search[1] + math.pi) % (2.0 * math.pi) - math.pi
+        return wrap_angle(self._search[1])
 
     def _receive(self, msg: object) -> None:
         counts = self._counts

@@ -51,7 +51,8 @@ IN_FRAME_MIN = 0.90  # paper: "almost 94 %" of frames with the person fully in t
 LOSS_TOLERANCE = 0.20  # "accurate up to 25 % loss": error within 20 % of the loss-free error
 OBSTACLE_TOLERANCE = 0.20  # "only slightly deteriorates": error within 20 % of the obstacle-free error
 LOSS_ACCURATE_PERCENT = 25.0
-# The controllers' teammate d_min (METHOD.md): a closer true approach is reported under each family's table.
+# The controllers' teammate d_min (docs/method.md#avoidance-guarantee): a closer true approach is reported
+# under each family's table.
 SEPARATION_MIN_M = 1.5
 SEPARATION = "min_separation_m"
 BELIEVED_SEPARATION = "min_believed_separation_m"
@@ -597,8 +598,8 @@ def render_report(
                 "",
                 f"Safety: runs in which two MAVs came closer than {SEPARATION_MIN_M:g} m (the controllers' "
                 "d_min) between their true positions, and in those runs the closest approach between the "
-                "positions the MAVs believed they were at (self-localisation with GPS drift, METHOD.md: what "
-                "the controllers keep apart). A believed approach below d_min too means the controllers "
+                "positions the MAVs believed they were at (self-localisation with GPS drift: what the "
+                "controllers keep apart). A believed approach below d_min too means the controllers "
                 "themselves let the MAVs close in; a believed approach above it means the drift did.",
                 "",
                 *(f"- {n}" for n in notes),

@@ -1,5 +1,5 @@
 """Specification of the potential fields (controller/fields.py): the cotangential magnitude and every external
-input of paper eqs. 12-16."""
+input of paper eqs. 10-15."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Specification of the MPC (controller/mpc.py): paper eqs. (4)-(9), METHOD.md "The MPC" and pitfall 1."""
+"""Specification of the MPC (controller/mpc.py): paper eqs. (4)-(9), docs/method.md#the-mpc and
+docs/method.md#infeasible-qps."""
 
 from __future__ import annotations
 

@@ -3,12 +3,12 @@
 One `Px4Autopilot` per vehicle, each with its own `Mavsdk` instance and connection URL. `connect()` waits for
 the autopilot and its health, sets the failsafe parameters skyring relies on (`Px4Config.failsafe_params`),
 and reads the estimator origin; `start()` then runs, on the event loop it was connected on, one reader task
-per telemetry stream into a state cache, a supervisor task (vehicles/px4_supervisor.py: engagement, the
+per telemetry stream into a state cache, a supervisor task (vehicles/px4/supervisor.py: engagement, the
 set-point watchdog, respect for a pilot) and a set-point streaming task. The `Autopilot` methods are
 non-blocking requests, safe to call from any thread.
 
 Frames: the team's ENU frame is converted to the vehicle's local NED frame here and nowhere else
-(vehicles/geodesy.py). Telemetry goes the other way. Link loss (no telemetry for `link_lost_after_s`) is
+(vehicles/px4/geodesy.py). Telemetry goes the other way. Link loss (no telemetry for `link_lost_after_s`) is
 reported in `AutopilotState.link_lost`.
 """
 
@@ -215,7 +215,7 @@ def _geodetic(message) -> GeodeticPoint | None:
 class Px4Status:
     """The back-end's own view of one vehicle, for the ground station and logs.
 
-    engagement: vehicles/px4_supervisor.Engagement value; setpoint_age_s: age of the agent's last set-point;
+    engagement: `vehicles.px4.supervisor.Engagement` value; setpoint_age_s: age of the agent's last set-point;
     counters: set-points ignored (not engaged) or rejected (malformed), land/hold requests not sent because a
     pilot flies the vehicle, watchdog holds/landings, commands PX4 refused or that timed out, telemetry
     readings dropped as malformed; frame_source: "origin" (the estimator

@@ -6,8 +6,8 @@ offboard-loss failsafe; so skyring watches the age of the agent's output itself:
 PX4 (a failsafe) is *released*: skyring stops streaming and does not switch back until re-engaged (takeoff);
 while a pilot flies it (a manual mode) skyring's land and hold requests are not sent either.
 
-Pure and clock-free: the asyncio back-end (vehicles/px4.py) reports set-points and telemetry observations,
-and executes the one `Command` that `step` returns. Engagement:
+Pure and clock-free: the asyncio back-end (vehicles/px4/autopilot.py) reports set-points and telemetry
+observations, and executes the one `Command` that `step` returns. Engagement:
 
     IDLE -takeoff-> TAKING_OFF -in Hold at height-> ENGAGING -pre-streamed-> FOLLOWING
     FOLLOWING -stale output-> WATCHDOG_HOLD -fresh output-> ENGAGING ; -stale longer-> LANDING

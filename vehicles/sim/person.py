@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controller.angles import wrap_angle
 from vehicles.world import PERSON_CENTRE_HEIGHT_M, PersonTruth
 
 STAND_STILL_S = 10.0  # the paper's person stands at the origin for 10 s before walking
@@ -46,7 +47,7 @@ class StillPerson:
 def paper_path(*, radius_m: float = PAPER_PATH_RADIUS_M, points_per_m: float = 4.0) -> np.ndarray:
     """(M, 2) the paper's walk as a dense closed polyline from the origin back to it.
 
-    Shape in units of the radius R (METHOD.md "Simulation", scaled from R = 15 m): a sine
+    Shape in units of the radius R (docs/method.md#simulated-world, scaled from R = 15 m): a sine
     (x, R/3 sin(2 pi x / R)) for x in 0..R; a clockwise arc of radius R about the origin from (R, 0) to
     (0, -R); an oscillating return (R/5 sin(4 pi y / R), y) from y = -R to 0.
     """
@@ -180,7 +181,7 @@ class RandomPerson:
         r = float(np.hypot(*xy))
         if r > p.arena_radius_m - 2.0:
             self._target_heading = math.atan2(-xy[1], -xy[0])
-        err = (self._target_heading - self._heading + np.pi) % (2.0 * np.pi) - np.pi
+        err = wrap_angle(self._target_heading - self._heading)
         self._heading += float(np.clip(err, -p.turn_rate_radps * dt, p.turn_rate_radps * dt))
         dv = np.clip(self._target_speed - self._speed, -p.accel_mps2 * dt, p.accel_mps2 * dt)
         self._speed = float(self._speed + dv)

@@ -1,9 +1,10 @@
 """Build the embedded simulation: person, trees, simulated vehicles, cameras, links and the mission over them.
 
-Both the deterministic runner (`server/simulation.py`) and the live ground station build their simulated team
-here, so the two fly the same world. Every random choice comes from one seed, split with numpy's SeedSequence
-into independent streams (person, trees, links, and per vehicle: GPS drift and detector noise), so a given
-seed gives the same world and the same run whatever the number of vehicles asks of the other streams.
+Both the deterministic runner (`server/lab/simulation.py`) and the live ground station build their simulated
+team here, so the two fly the same world. Every random choice comes from one seed, split with numpy's
+SeedSequence into independent streams (person, trees, links, and per vehicle: GPS drift and detector noise),
+so a given seed gives the same world and the same run whatever the number of vehicles asks of the other
+streams.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ import numpy as np
 
 from controller.messages import Obstacle
 
-# The paper's Gazebo world (METHOD.md "Simulation"), ENU x, y in metres.
+# The paper's Gazebo world (docs/method.md#simulated-world), ENU x, y in metres.
 PAPER_TREES_XY: tuple[tuple[float, float], ...] = (
     (-14.0, -7.0),
     (-15.0, -3.5),

@@ -1,5 +1,5 @@
-"""`skyring serve --px4`: vehicle URLs and option checks (server/px4_station.py); the flights themselves are
-in tests/vehicles/test_px4_e2e.py."""
+"""`skyring serve --px4`: vehicle URLs and option checks (server/station/px4.py); the flights themselves are
+in tests/vehicles/px4/test_px4_e2e.py."""
 
 from __future__ import annotations
 

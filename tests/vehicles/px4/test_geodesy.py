@@ -1,4 +1,4 @@
-"""ENU <-> NED, yaw conventions and geodetic <-> team ENU (vehicles/geodesy.py)."""
+"""ENU <-> NED, yaw conventions and geodetic <-> team ENU (vehicles/px4/geodesy.py)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import numpy as np
 import pymap3d
 import pytest
 
+from controller.angles import wrap_angle
 from vehicles.px4.geodesy import (
     GeodeticPoint,
     LocalFrame,
@@ -16,7 +17,6 @@ from vehicles.px4.geodesy import (
     geodetic_to_enu,
     ned_to_enu,
     parse_geodetic,
-    wrap_angle,
     yaw_enu_to_ned,
     yaw_ned_to_enu,
 )
@@ -51,11 +51,6 @@ def test_yaw_ned_to_enu_inverts_yaw_enu_to_ned():
     rng = np.random.default_rng(2)
     for yaw in rng.uniform(-math.pi, math.pi, size=100):
         assert yaw_ned_to_enu(yaw_enu_to_ned(yaw)) == pytest.approx(wrap_angle(yaw), abs=1e-12)
-
-
-def test_wrap_angle_lands_in_half_open_interval():
-    assert wrap_angle(math.pi) == pytest.approx(-math.pi)
-    assert wrap_angle(3 * math.pi + 0.25) == pytest.approx(-math.pi + 0.25)
 
 
 def test_geodetic_to_enu_of_a_point_111_m_north_is_111_m_north():

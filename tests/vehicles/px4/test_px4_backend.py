@@ -1,4 +1,5 @@
-"""The PX4 back-end's pure parts: set-point construction, mode reading, configuration (vehicles/px4.py)."""
+"""The PX4 back-end's pure parts: set-point construction, mode reading, configuration
+(vehicles/px4/autopilot.py)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """End to end: three PX4 test peers and the ground station of `skyring serve --px4`, in-process through the
-same code path as the command (server/px4_station.serve_px4), driven through its REST API."""
+same code path as the command (server/station/px4.py, `serve_px4`), driven through its REST API."""
 
 from __future__ import annotations
 

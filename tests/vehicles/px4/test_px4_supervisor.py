@@ -1,4 +1,5 @@
-"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release (vehicles/px4_supervisor)."""
+"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release
+(vehicles/px4/supervisor.py)."""
 
 from __future__ import annotations
 
