@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: run test bench lint chromium clean
+.PHONY: run test check bench lint chromium clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,12 +22,17 @@ run: $(STAMP)
 test: $(STAMP) chromium
 	$(PY) -m pytest -q -ra -n auto --durations=15
 
+# The fast part: no closed-loop runs, browser or end-to-end tests (they run in `make test` and CI).
+check: $(STAMP)
+	$(PY) -m pytest -q -ra -n auto -m "not slow and not browser and not e2e"
+
 bench: $(STAMP)
 	$(VENV)/bin/skyring bench all
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check controller vehicles server webui tests
 	$(VENV)/bin/ruff format --check controller vehicles server webui tests
+	$(VENV)/bin/pyright
 
 clean:
 	rm -rf $(VENV) .pytest_cache

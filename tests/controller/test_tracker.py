@@ -178,6 +178,7 @@ def test_estimate_does_not_change_the_filter():
 # ---------------------------------------------------------------- consistency on a walking person
 
 
+@pytest.mark.slow  # 100 Monte-Carlo runs
 def test_average_position_nees_of_walking_person_lies_in_95_percent_chi_square_interval(walking_runs):
     """Statistics: 20 independent runs x 22 times 5 s apart (after 10 s burn-in) = 440 NEES samples. The
     filter's error decorrelates within about a second (see the next test), so the samples are independent and
@@ -189,6 +190,7 @@ def test_average_position_nees_of_walking_person_lies_in_95_percent_chi_square_i
     assert lo < nees.mean() < hi
 
 
+@pytest.mark.slow  # shares the Monte-Carlo runs above
 def test_nees_samples_five_seconds_apart_are_uncorrelated(walking_runs):
     """Backs the independence assumption of the previous test: lag-1 correlation of NEES on the 5 s grid."""
     _, nees, _ = walking_runs
@@ -196,6 +198,7 @@ def test_nees_samples_five_seconds_apart_are_uncorrelated(walking_runs):
     assert abs(rho) < 0.2
 
 
+@pytest.mark.slow  # shares the Monte-Carlo runs above
 def test_three_mav_fused_track_beats_single_mav_track_on_the_same_data(walking_runs):
     fused, _, single = walking_runs
     rms_fused = np.sqrt(np.mean(np.sum(fused**2, axis=-1)))

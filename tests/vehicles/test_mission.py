@@ -102,6 +102,7 @@ def test_land_all_and_release_one():
     assert phases == [Phase.FORMATION, Phase.LANDED, Phase.LANDED]
 
 
+@pytest.mark.slow
 def test_changing_d_des_moves_the_team_to_the_new_distance():
     setup = _setup()
     t = _in_formation(setup, 20.0)

@@ -15,6 +15,8 @@ import pytest
 
 from server.station.live import bind_port
 
+pytestmark = pytest.mark.e2e  # starts `skyring serve` as a process and talks to it over HTTP
+
 ROOT = Path(__file__).resolve().parents[3]
 
 

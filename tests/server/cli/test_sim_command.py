@@ -7,9 +7,6 @@ from pathlib import Path
 
 import pytest
 
-from server.cli.sim import START_LAYOUTS
-from vehicles.sim.scenario import START_LAYOUTS as SCENARIO_START_LAYOUTS
-
 SKYRING = [sys.executable, "-c", "from server.cli import main; main()"]
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -61,6 +58,8 @@ def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
         (["--person", "dancing"], "--person"),
         (["--warmup", "90", "--duration", "60"], "--warmup"),
         (["--replan-rate", "500"], "--replan-rate"),
+        (["--d-des", "nan"], "--d-des"),
+        (["--start", "circle"], "--start"),
     ],
 )
 def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option):
@@ -78,5 +77,10 @@ def test_without_headless_it_points_to_skyring_serve():
     assert "skyring serve" in done.stderr and len(done.stderr.strip().splitlines()) == 1
 
 
-def test_the_command_knows_the_same_start_layouts_as_the_scenario():
-    assert START_LAYOUTS == SCENARIO_START_LAYOUTS
+@pytest.mark.parametrize("command", ["sim", "serve"])
+def test_both_commands_refuse_a_seventeenth_vehicle_in_one_line(command):
+    done = _skyring(command, "--vehicles", "17", *(["--headless"] if command == "sim" else ["--no-log"]))
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "Error: Invalid value for '--vehicles': Input should be less than or equal to 16"
+    ]

@@ -7,6 +7,7 @@ import pytest
 import typer
 
 from server.cli.serve import run_px4
+from server.settings import RunSettings
 from server.station.px4 import px4_urls
 
 
@@ -39,11 +40,7 @@ def _run(**overrides):
         px4=[],
         sitl=0,
         origin=None,
-        seed=0,
-        method="active",
-        person="still",
-        trees="none",
-        rate_hz=20.0,
+        settings=RunSettings(person="still", trees="none", rate_hz=20.0),
         host="127.0.0.1",
         port=0,
         viser_port=0,

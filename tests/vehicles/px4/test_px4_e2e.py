@@ -26,7 +26,7 @@ from vehicles.px4.geodesy import GeodeticPoint, geodetic_to_enu  # noqa: E402
 from vehicles.px4.supervisor import SupervisorParams  # noqa: E402
 from webui.panels import STALE_FLAG, vehicle_card  # noqa: E402
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.e2e
 
 REF = GeodeticPoint(47.397742, 8.545594, 488.0)
 D_DES_M = 8.0  # the formation default; the still person stands at the team origin
