@@ -51,8 +51,10 @@ def _repulsion(
 ) -> np.ndarray:
     """(2,) sum of cotangential repulsions F(dist) (J,) along diff (J, 2)."""
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=fields.freeze_fraction)
-    mag = cotangential_magnitude(
-        dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=fields.freeze_fraction
+    mag = np.asarray(
+        cotangential_magnitude(
+            dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=fields.freeze_fraction
+        )
     )
     norm = np.sqrt(np.einsum("ji,ji->j", diff, diff))
     return (mag[:, None] * diff / np.where(norm > 1e-9, norm, np.inf)[:, None]).sum(axis=0)

@@ -413,7 +413,14 @@ def tracking_inputs(
 
 
 def repulsion_inputs(
-    *, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, peak: float, params: FieldParams, tie_sign=1.0
+    *,
+    diff_xy: np.ndarray,
+    dist: np.ndarray,
+    d_min: float,
+    d_max: float | np.ndarray,
+    peak: float,
+    params: FieldParams,
+    tie_sign: float | np.ndarray = 1.0,
 ) -> np.ndarray:
     """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eq. 12), (N+1, 2).
 
@@ -428,8 +435,10 @@ def repulsion_inputs(
     d_max = d_max[within] if np.ndim(d_max) == 2 else d_max
     tie_sign = tie_sign[within] if np.ndim(tie_sign) == 2 else tie_sign
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
-    mag = cotangential_magnitude(
-        dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction
+    mag = np.asarray(
+        cotangential_magnitude(
+            dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction
+        )
     )
     norm = np.sqrt(np.einsum("...i,...i->...", diff_xy, diff_xy))
     return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)

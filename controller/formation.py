@@ -189,8 +189,8 @@ class FormationController:
         if price:
             f_total = np.zeros((self._steps, 3))
         else:
-            f_total = self._inputs(tick, mates, obstacle_set, formation)
-        target, target_v = self._target(tick, f_total, formation, preferred_bearing_rad, price)
+            f_total = self._inputs(tick, person, mates, obstacle_set, formation)
+        target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
 
         sol = self._mpc.solve(
             position_m=start_p,
@@ -286,7 +286,7 @@ class FormationController:
                 reference_velocity_mps=ref_v,
                 params=self._params.reference,
             )
-        if ref_p is not None:
+        if ref_p is not None and ref_v is not None:
             return ref_p, ref_v
         mp = self._mpc_params
         if self._last_position is not None:
@@ -332,11 +332,16 @@ class FormationController:
         key = own.position_cov_m2.tobytes()
         if key != self._cov_key:
             cov = np.asarray(own.position_cov_m2, dtype=float)
-            self._cov_key, self._cov_radius = key, (covariance_radius_m(cov) if _finite(cov) else 0.0)
+            self._cov_key, self._cov_radius = key, (float(covariance_radius_m(cov)) if _finite(cov) else 0.0)
         return self._cov_radius
 
     def _inputs(
-        self, tick: _Tick, mates: TeammatePaths, obstacle_set: ObstacleSet, formation: FormationParams
+        self,
+        tick: _Tick,
+        person: PersonEstimate,
+        mates: TeammatePaths,
+        obstacle_set: ObstacleSet,
+        formation: FormationParams,
     ) -> np.ndarray:
         """(N+1, 3) clamped external inputs on the previous plan, moved to begin at the start state."""
         prm = self._params
@@ -351,9 +356,9 @@ class FormationController:
         # The braking margin needs the vehicle's velocity, not the plan's: the follower lags the plan.
         measured_v = np.asarray(tick.own.velocity_mps, dtype=float)
         own_vel = own_vel + ((measured_v if _finite(measured_v) else tick.start_v) - own_vel[0])
-        person_p = np.asarray(tick.person.position_m, dtype=float)
+        person_p = np.asarray(person.position_m, dtype=float)
         if prm.reference.predict_person:
-            person_v = np.asarray(tick.person.velocity_mps, dtype=float)
+            person_v = np.asarray(person.velocity_mps, dtype=float)
             person_p = person_p + person_v * (dt * np.arange(self._steps)[:, None])
         ext = external_inputs(
             own_positions_m=own_path,
@@ -375,6 +380,7 @@ class FormationController:
     def _target(
         self,
         tick: _Tick,
+        person: PersonEstimate,
         f_total: np.ndarray,
         formation: FormationParams,
         preferred_bearing_rad: float | None,
@@ -386,8 +392,8 @@ class FormationController:
         """
         mp = self._mpc_params
         ref = self._params.reference
-        person_p = np.asarray(tick.person.position_m, dtype=float)
-        person_v = np.zeros(3) if price else np.asarray(tick.person.velocity_mps, dtype=float)
+        person_p = np.asarray(person.position_m, dtype=float)
+        person_v = np.zeros(3) if price else np.asarray(person.velocity_mps, dtype=float)
         target, target_v = terminal_reference(
             position_m=tick.start_p,
             person_position_m=person_p,

@@ -235,6 +235,7 @@ class ModelPredictiveController:
         self._free_x0, self._input_to_state = self._prediction_matrices()
         self._g_terminal = self._input_to_state[-6:]
         self._a_matrix = self._build_constraints()
+        self._n_constraints = self._nu + 12 * m + 6  # rows of _a_matrix (see _build_constraints)
         self._upper_rows = slice(self._nu, self._nu + 6 * m)  # rows of G u - s <= x_max - h
         self._lower_rows = slice(self._nu + 6 * m, self._nu + 12 * m)  # rows of G u + s >= x_min - h
         self._l_template, self._u_template = self._constant_bounds()
@@ -476,7 +477,7 @@ class ModelPredictiveController:
         accepted = ACCEPTED_STATUSES if prm.accept_inaccurate else ACCEPTED_STATUSES[:1]
         if status not in accepted or not (np.all(np.isfinite(result.x)) and np.all(np.isfinite(result.y))):
             self._warm = None
-            self._solver.warm_start(x=np.zeros(self._n_var), y=np.zeros(self._a_matrix.shape[0]))
+            self._solver.warm_start(x=np.zeros(self._n_var), y=np.zeros(self._n_constraints))
             message = f"OSQP: {status} after {iterations} iterations"
             return self._failure(status, message, iterations, run_time)
 

@@ -17,7 +17,6 @@ from controller.mpc import MpcParams
 from controller.reference import ReferenceParams
 from controller.tracker import TrackerParams
 
-
 MAX_TEAM_SIZE = 16
 """The largest team the controller is tuned and tested for (K = 2..16). At the paper's d_des = 8 m the ring of
 16 MAVs leaves 3.12 m between neighbours, just outside a fresh teammate-repulsion d_max of 3.0 m; a 17th MAV

@@ -238,14 +238,17 @@ class PersonTracker:
         """Gate a detection that belongs before cache[index] and, if it passes, re-filter from there."""
         cache = self._cache
         following = cache[index]
-        x, P = following.x_before, following.P_before
-        if key[0] > following.t_before:
-            F, Q = self._fq(key[0] - following.t_before)
+        t_before, x_before, P_before = following.t_before, following.x_before, following.P_before
+        if t_before is None or x_before is None or P_before is None:  # the track's first detection
+            return Verdict.STALE
+        x, P = x_before, P_before
+        if key[0] > t_before:
+            F, Q = self._fq(key[0] - t_before)
             x, P = F @ x, F @ P @ F.T + Q
         if not self._within_gate(x, P, z, R):
             return Verdict.GATED
-        self._t = following.t_before
-        self._kf.x, self._kf.P = following.x_before.copy(), following.P_before.copy()
+        self._t = t_before
+        self._kf.x, self._kf.P = x_before.copy(), P_before.copy()
         cache.insert(index, _Entry(key, z, R))
         replay = cache[index:]
         del cache[index:]
@@ -263,7 +266,7 @@ class PersonTracker:
             del self._cache[0]
 
     def _predict_to(self, t_s: float) -> None:
-        if t_s > self._t:
+        if self._t is not None and t_s > self._t:
             F, Q = self._fq(t_s - self._t)
             self._kf.predict(F=F, Q=Q)
             self._t = t_s

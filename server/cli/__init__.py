@@ -37,7 +37,14 @@ COMMANDS: dict[str, str] = {
 }
 
 
+_registered: set[str] = set()
+
+
 def _register(name: str, target: str) -> None:
+    """Add command `name` to the app once (main() may run more than once in one process, as in tests)."""
+    if name in _registered:
+        return
+    _registered.add(name)
     module_name, func_name = target.split(":")
     module = importlib.import_module(module_name)
     app.command(name=name)(getattr(module, func_name))

@@ -45,12 +45,12 @@ CLUSTER_SPACING_M = 2.5  # neighbours on the launch arc of the "cluster" layout
 class Scenario:
     """The simulated world and team.
 
-    vehicles: K, 1..MAX_TEAM_SIZE; seed >= 0; method; trees: "paper", "none" or N random; person: paper | random | still;
-    comm_loss in [0, 1]; latency_s: link latency (plus up to jitter_s); start: "ring" (on the ground at the
-    roster slots, d_des from the person, as a crew would set them out) or "cluster" (side by side, 2.5 m
-    apart, south of the person: the team has to spread out); gps_drift: simulate self-localisation drift;
-    virtual_obstacles: "none" or "paper" (the paper's 13 tree positions as the operator's virtual obstacles:
-    avoided like trunks but invisible to the cameras, the paper's SE4).
+    vehicles: K, 1..MAX_TEAM_SIZE; seed >= 0; method; trees: "paper", "none" or N random; person: paper |
+    random | still; comm_loss in [0, 1]; latency_s: link latency (plus up to jitter_s); start: "ring" (on the
+    ground at the roster slots, d_des from the person, as a crew would set them out) or "cluster" (side by
+    side, 2.5 m apart, south of the person: the team has to spread out); gps_drift: simulate self-localisation
+    drift; virtual_obstacles: "none" or "paper" (the paper's 13 tree positions as the operator's virtual
+    obstacles: avoided like trunks but invisible to the cameras, the paper's SE4).
     """
 
     vehicles: int = 3

@@ -1,23 +1,15 @@
 """`skyring sim`: arguments, the printed table, the JSON report, one-line errors."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
-
-SKYRING = [sys.executable, "-c", "from server.cli import main; main()"]
-ROOT = Path(__file__).resolve().parents[3]
+from cli_run import run_skyring
 
 
-def _skyring(*args):
-    return subprocess.run([*SKYRING, *args], capture_output=True, text=True, cwd=ROOT, timeout=300)
-
-
-def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
+def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path, capsys):
     path = tmp_path / "report.json"
-    done = _skyring(
+    done = run_skyring(
+        capsys,
         "sim",
         "--headless",
         "--vehicles",
@@ -62,8 +54,8 @@ def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
         (["--start", "circle"], "--start"),
     ],
 )
-def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option):
-    done = _skyring("sim", "--headless", *args)
+def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option, capsys):
+    done = run_skyring(capsys, "sim", "--headless", *args)
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr
@@ -71,15 +63,17 @@ def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option):
     assert done.stdout == ""
 
 
-def test_without_headless_it_points_to_skyring_serve():
-    done = _skyring("sim")
+def test_without_headless_it_points_to_skyring_serve(capsys):
+    done = run_skyring(capsys, "sim")
     assert done.returncode == 2
     assert "skyring serve" in done.stderr and len(done.stderr.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("command", ["sim", "serve"])
-def test_both_commands_refuse_a_seventeenth_vehicle_in_one_line(command):
-    done = _skyring(command, "--vehicles", "17", *(["--headless"] if command == "sim" else ["--no-log"]))
+def test_both_commands_refuse_a_seventeenth_vehicle_in_one_line(command, capsys):
+    done = run_skyring(
+        capsys, command, "--vehicles", "17", *(["--headless"] if command == "sim" else ["--no-log"])
+    )
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
         "Error: Invalid value for '--vehicles': Input should be less than or equal to 16"

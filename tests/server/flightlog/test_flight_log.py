@@ -363,6 +363,7 @@ def test_serve_with_and_without_log_is_refused():
     assert "--log PATH or --no-log, not both" in result.output
 
 
+@pytest.mark.e2e  # starts `skyring serve` as a process
 def test_serve_writes_its_flight_log_where_asked_and_prints_the_path(tmp_path):
     path = tmp_path / "serve.jsonl"
     command = [

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_run import run_skyring
 
 from server.lab import experiments as exp
 from server.lab import figures
@@ -472,8 +473,8 @@ def _untimed_metrics(path: Path) -> dict:
     return {k: v for k, v in json.loads(path.read_text())["metrics"].items() if not rep.is_timing(k)}
 
 
-def test_a_run_shorter_than_the_warm_up_is_refused_before_anything_runs(tmp_path):
-    proc = _skyring("methods", "--duration", "10", out=tmp_path)
+def test_a_run_shorter_than_the_warm_up_is_refused_before_anything_runs(tmp_path, capsys):
+    proc = run_skyring(capsys, "experiment", "methods", "--duration", "10", "--out", str(tmp_path))
     assert proc.returncode == 2
     assert "methods / SE1 price: warmup_s must be below duration_s (10 s), got 20" in proc.stderr
     assert not list(tmp_path.rglob("run-*.json"))
