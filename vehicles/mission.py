@@ -21,6 +21,7 @@ import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import NoReturn
 
 from controller.messages import HorizonPlan, Obstacle, PersonEstimate, SolveStatus
 from controller.params import ControllerParams, FormationParams
@@ -267,14 +268,17 @@ class Mission:
             self._advance_phase(v, now_s)
         # A vehicle whose link is lost gets no agent tick (nothing would reach it) and leaves the roster; its
         # teammates avoid it around its last plan, the wider the longer it is silent (vehicles/link_loss.py).
-        silent = {vid for vid, v in self._vehicles.items() if v.state is not None and v.state.link_lost}
+        lost = {
+            vid: v.state for vid, v in self._vehicles.items() if v.state is not None and v.state.link_lost
+        }
+        silent = set(lost)
         obstacles += tuple(
             silent_vehicle_obstacle(
-                state=self._vehicles[vid].state,
+                state=state,
                 now_s=now_s,
-                plan=self._vehicles[vid].last.plan if self._vehicles[vid].last is not None else None,
+                plan=last.plan if (last := self._vehicles[vid].last) is not None else None,
             )
-            for vid in sorted(silent)
+            for vid, state in sorted(lost.items())
         )
         roster = [
             vid
@@ -301,10 +305,11 @@ class Mission:
                 role=role,
                 roster=slots,
             )
-            t0 = self._clock() if self._clock is not None else None
+            clock = self._clock
+            t0 = clock() if clock is not None else None
             out = v.agent.tick(now_s, inputs)
-            if t0 is not None:
-                v.tick_s = self._clock() - t0
+            if clock is not None and t0 is not None:
+                v.tick_s = clock() - t0
             v.last = out
             if out.setpoint is not None and role == AgentRole.FORMATION:
                 v.autopilot.send_setpoint(out.setpoint)
@@ -368,7 +373,7 @@ class Mission:
             self._refuse(f"no vehicle with id {vehicle_id!r}; vehicles are {list(self._vehicles)}")
         return v
 
-    def _refuse(self, message: str) -> None:
+    def _refuse(self, message: str) -> NoReturn:
         self._rejected_actions += 1
         raise MissionError(message)
 

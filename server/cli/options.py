@@ -15,12 +15,23 @@ import typer
 
 from controller.params import Method
 from server.settings import MAX_VEHICLES, RATE_RANGE_HZ
-from vehicles.sim.person import PERSON_MODES
-from vehicles.sim.scenario import START_LAYOUTS
 from vehicles.sim.trees import TreeSpec
 
-PersonMode = StrEnum("PersonMode", {mode: mode for mode in PERSON_MODES})
-StartLayout = StrEnum("StartLayout", {layout: layout for layout in START_LAYOUTS})
+
+class PersonMode(StrEnum):
+    """`--person`: vehicles.sim.person.PERSON_MODES as a choice."""
+
+    paper = "paper"
+    random = "random"
+    still = "still"
+
+
+class StartLayout(StrEnum):
+    """`--start`: vehicles.sim.scenario.START_LAYOUTS as a choice."""
+
+    ring = "ring"
+    cluster = "cluster"
+
 
 # settings field -> command-line option, for errors that only the settings can find
 OPTION_OF_FIELD = {

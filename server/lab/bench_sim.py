@@ -9,6 +9,7 @@ control tick (the paper), and solved at 10 Hz with the set-points following the 
 
 from __future__ import annotations
 
+from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
 
 TARGET_REALTIME_FACTOR = 5.0
@@ -32,7 +33,7 @@ def run(*, repeats: int) -> None:
             seed=1,
             trees="paper",
             person="paper",
-            method="active",
+            method=Method.ACTIVE,
             replan_hz=replan_hz,
         )
         m = run_simulation(config).metrics

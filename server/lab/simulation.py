@@ -68,7 +68,10 @@ class SimReport:
 
 
 def _sample(setup: SimSetup, snap: MissionSnapshot, t: float) -> TickSample:
-    person = np.asarray(snap.person_truth.position_m)
+    truth = snap.person_truth
+    if truth is None:
+        raise ValueError("the simulated world must know where the person is")
+    person = np.asarray(truth.position_m)
     k = len(snap.vehicles)
     estimates = np.full((k, 3), np.nan)
     traces = np.full(k, np.nan)

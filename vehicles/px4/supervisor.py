@@ -103,7 +103,7 @@ class OffboardSupervisor:
         self.watchdog_holds = 0
         self.watchdog_landings = 0
         self._last_setpoint_s: float | None = None
-        self._stream_start_s: float | None = None
+        self._stream_start_s = -math.inf  # when the current uninterrupted set-point stream began
         self._streamed_since_engaged = False
         self._requests: list[tuple[str, float | None]] = []
         self._last_command: Command | None = None
@@ -317,7 +317,8 @@ class OffboardSupervisor:
         if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD)):
             self._release(obs)
             return None
-        if self._fresh(obs.now_s) and self._last_setpoint_s > self._last_command_s:
+        last_setpoint_s = self._last_setpoint_s
+        if self._fresh(obs.now_s) and last_setpoint_s is not None and last_setpoint_s > self._last_command_s:
             self._engage(obs)  # set-points after the hold: follow them again
             return None
         if self._due_retry(Command.HOLD, obs):

@@ -111,8 +111,8 @@ class SimAutopilot:
             self._state = AutopilotState(
                 vehicle_id=self.vehicle_id,
                 stamp_s=self._t,
-                position_m=(self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]),
-                velocity_mps=(self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]),
+                position_m=np.array([self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]]),
+                velocity_mps=np.array([self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]]),
                 yaw_rad=self._yaw,
                 armed=self._armed,
                 in_air=self._in_air,
@@ -172,7 +172,7 @@ class SimAutopilot:
         return BodyPose(
             vehicle_id=self.vehicle_id,
             stamp_s=self._t,
-            position_m=tuple(self._pos),
+            position_m=np.array(self._pos, dtype=float),
             believed_offset_m=self._drift.offset_m,
             yaw_rad=self._yaw,
             roll_rad=roll,

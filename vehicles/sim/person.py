@@ -27,8 +27,8 @@ PERSON_MODES = ("paper", "random", "still")  # the models below, by name
 def _truth(t_s: float, xy: np.ndarray, vxy: np.ndarray) -> PersonTruth:
     return PersonTruth(
         stamp_s=t_s,
-        position_m=(float(xy[0]), float(xy[1]), PERSON_CENTRE_HEIGHT_M),
-        velocity_mps=(float(vxy[0]), float(vxy[1]), 0.0),
+        position_m=np.array([xy[0], xy[1], PERSON_CENTRE_HEIGHT_M], dtype=float),
+        velocity_mps=np.array([vxy[0], vxy[1], 0.0], dtype=float),
     )
 
 
@@ -178,7 +178,7 @@ class RandomPerson:
         if self._behaviour_left_s <= 0.0:
             self._next_behaviour()
         self._behaviour_left_s -= dt
-        r = float(np.hypot(*xy))
+        r = float(np.hypot(xy[0], xy[1]))
         if r > p.arena_radius_m - 2.0:
             self._target_heading = math.atan2(-xy[1], -xy[0])
         err = wrap_angle(self._target_heading - self._heading)
@@ -187,7 +187,7 @@ class RandomPerson:
         self._speed = float(self._speed + dv)
         v = self._speed * np.array([math.cos(self._heading), math.sin(self._heading)])
         new = xy + v * dt
-        rn = float(np.hypot(*new))
+        rn = float(np.hypot(new[0], new[1]))
         if rn > p.arena_radius_m:
             new = new * (p.arena_radius_m / rn)
         self._xy.append(new)

@@ -139,6 +139,7 @@ def start_positions(
         bearings = [-math.pi / 2.0 + (k - (count - 1) / 2.0) * step for k in range(count)]
     out = []
     for b in bearings:
+        xy = person_xy_m + d_des_m * np.array([math.cos(b), math.sin(b)])
         for j in range(41):
             turn = math.radians(2.0 * ((j + 1) // 2) * (1 if j % 2 else -1))
             xy = person_xy_m + d_des_m * np.array([math.cos(b + turn), math.sin(b + turn)])
@@ -153,7 +154,7 @@ def paper_virtual_obstacles() -> tuple[Obstacle, ...]:
     return tuple(
         Obstacle(
             obstacle_id=f"virtual-{i + 1}",
-            center_m=xy,
+            center_m=np.array(xy),
             radius_m=TREE_RADIUS_M,
             height_m=TREE_HEIGHT_M,
             kind="virtual",

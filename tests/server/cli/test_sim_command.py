@@ -5,6 +5,10 @@ import json
 import pytest
 from cli_run import run_skyring
 
+from server.cli.options import PersonMode, StartLayout
+from vehicles.sim.person import PERSON_MODES
+from vehicles.sim.scenario import START_LAYOUTS
+
 
 def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path, capsys):
     path = tmp_path / "report.json"
@@ -78,3 +82,8 @@ def test_both_commands_refuse_a_seventeenth_vehicle_in_one_line(command, capsys)
     assert done.stderr.strip().splitlines() == [
         "Error: Invalid value for '--vehicles': Input should be less than or equal to 16"
     ]
+
+
+def test_the_command_offers_exactly_the_people_and_start_layouts_the_scenario_knows():
+    assert tuple(m.value for m in PersonMode) == PERSON_MODES
+    assert tuple(s.value for s in StartLayout) == START_LAYOUTS
