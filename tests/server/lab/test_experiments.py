@@ -410,11 +410,11 @@ def test_report_puts_one_table_and_the_claims_under_each_family(tmp_path):
 def test_progress_writes_one_line_per_finished_run_when_not_on_a_terminal():
     import io
 
-    from server.cli.experiment import TextProgress
+    from server.cli.experiment import RunProgress
 
     specs = exp.plan_runs([exp.quick_protocol("obstacles")], base_seed=0)[:2]
     stream = io.StringIO()
-    bar = TextProgress(total=2, stream=stream)
+    bar = RunProgress(total=2, stream=stream)
     bar(1, 2, exp.RunResult(spec=specs[0], report={"metrics": {}}))
     bar(2, 2, exp.RunResult(spec=specs[1], report=None, error="boom"))
     lines = stream.getvalue().splitlines()
