@@ -104,7 +104,7 @@ class Stat:
         return self.q75 - self.q25
 
 
-def describe(values: Sequence[float]) -> Stat | None:
+def describe(values: Sequence[float | None]) -> Stat | None:
     """The `Stat` of the finite values in `values`, or None if there are none."""
     arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if arr.size == 0:

@@ -89,6 +89,7 @@ def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarr
         tol_ktratio=1e-10,
     )
     assert problem.status == cp.OPTIMAL
+    assert u.value is not None and p.value is not None and v.value is not None
     return u.value, p.value, v.value
 
 
@@ -318,6 +319,7 @@ def test_non_finite_argument_gives_not_ok_with_message(name):
     sol = solve(ModelPredictiveController(PARAMS), **{name: bad})
     assert not sol.ok
     assert sol.status == "invalid_input"
+    assert sol.message is not None
     assert name in sol.message
 
 
@@ -326,6 +328,7 @@ def test_implausibly_large_argument_gives_not_ok():
     sol = solve(ModelPredictiveController(PARAMS), target_position_m=np.array([1e30, 0.0, 6.0]))
     assert not sol.ok
     assert sol.status == "invalid_input"
+    assert sol.message is not None
     assert "target_position_m is implausibly large" in sol.message
 
 
@@ -340,6 +343,7 @@ def test_controller_solves_normally_after_invalid_input():
 def test_indefinite_terminal_weight_is_rejected():
     sol = solve(ModelPredictiveController(PARAMS), terminal_velocity_weight=np.diag([100.0, 100.0, -1.0]))
     assert not sol.ok
+    assert sol.message is not None
     assert "positive semidefinite" in sol.message
 
 
@@ -348,6 +352,7 @@ def test_asymmetric_terminal_weight_is_rejected():
     weight[0, 1] = 5.0
     sol = solve(ModelPredictiveController(PARAMS), terminal_position_weight=weight)
     assert not sol.ok
+    assert sol.message is not None
     assert "symmetric" in sol.message
 
 
@@ -361,6 +366,7 @@ def test_solver_failure_is_not_ok_and_carries_no_numbers():
     sol = solve(ModelPredictiveController(params), target_position_m=np.array([15.0, -12.0, 9.0]))
     assert not sol.ok
     assert sol.status == "maximum iterations reached"
+    assert sol.message is not None
     assert "OSQP" in sol.message and sol.iterations == 10
     assert np.all(np.isnan(sol.inputs_mps2)) and np.all(np.isnan(sol.positions_m))
 

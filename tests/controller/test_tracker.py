@@ -71,6 +71,7 @@ def _track_errors(t, p, detections) -> tuple[np.ndarray, np.ndarray]:
     for det in detections:
         while g < len(GRID_S) and GRID_S[g] < det.stamp_s:
             est = tracker.estimate(GRID_S[g])
+            assert est is not None
             errors.append(est.position_m - _at(t, p, GRID_S[g]))
             covs.append(est.position_cov_m2)
             g += 1
@@ -155,6 +156,7 @@ def test_first_detection_starts_track_at_it_with_initial_covariance():
     tracker = PersonTracker()
     assert tracker.update(_det(5.0, [1.0, 2.0, 0.9])) is Verdict.ACCEPTED
     est = tracker.estimate(5.0)
+    assert est is not None
     np.testing.assert_array_equal(est.position_m, [1.0, 2.0, 0.9])
     np.testing.assert_array_equal(est.velocity_mps, 0.0)
     np.testing.assert_array_equal(est.cov, np.diag([100.0, 100.0, 10.0, 1.0, 1.0, 0.5]))
@@ -222,6 +224,7 @@ def test_shuffled_detections_within_latency_window_give_same_estimate_as_in_orde
     assert verdicts.count(Verdict.ACCEPTED) == len(dets)
     assert late.stats().out_of_order > 100
     a, b = in_order.estimate(30.0), late.estimate(30.0)
+    assert a is not None and b is not None
     np.testing.assert_allclose(b.position_m, a.position_m, atol=1e-9)
     np.testing.assert_allclose(b.velocity_mps, a.velocity_mps, atol=1e-9)
     np.testing.assert_allclose(b.cov, a.cov, atol=1e-9)
@@ -261,6 +264,7 @@ def _offset_detection(tracker: PersonTracker, stamp: float, sigmas: float) -> De
     """A detection sigmas Mahalanobis units from the prediction, along the innovation's widest axis."""
     cov = np.diag([1.0, 0.2, 0.1])
     pred = tracker.estimate(stamp)
+    assert pred is not None
     S = pred.position_cov_m2 + cov
     w, V = np.linalg.eigh(S)
     return _det(stamp, pred.position_m + sigmas * np.sqrt(w[-1]) * V[:, -1], cov, source=9)
@@ -352,6 +356,7 @@ def test_next_detection_after_expiry_resets_the_track_at_it():
     stamp = dets[-1].stamp_s + 10.5
     assert tracker.update(_det(stamp, [40.0, -3.0, 0.9])) is Verdict.RESET
     est = tracker.estimate(stamp)
+    assert est is not None
     np.testing.assert_array_equal(est.position_m, [40.0, -3.0, 0.9])
     np.testing.assert_array_equal(est.cov, np.diag([100.0, 100.0, 10.0, 1.0, 1.0, 0.5]))
     counts = tracker.stats()

@@ -10,7 +10,7 @@ from server.settings import RunSettings
 
 
 def test_settings_normalise_what_they_accept():
-    settings = RunSettings(vehicles=5, method="DQMPC", trees=7, seed=3)
+    settings = RunSettings(**{"vehicles": 5, "method": "DQMPC", "trees": 7, "seed": 3})  # as JSON holds them
     assert settings.method is Method.DQMPC and settings.trees == "7" and settings.vehicles == 5
     assert settings.scenario().vehicles == 5 and settings.formation.d_des_m == 8.0
 

@@ -97,9 +97,9 @@ def test_forward_acceleration_pitches_nose_down_and_leftward_rolls_left_side_dow
 
 
 def test_a_trunk_between_camera_and_person_blocks_the_line_of_sight():
-    trunk = Obstacle(obstacle_id="t", center_m=(4.0, 0.05), radius_m=0.3, height_m=12.0)
-    beside = Obstacle(obstacle_id="b", center_m=(4.0, 1.0), radius_m=0.3, height_m=12.0)
-    short = Obstacle(obstacle_id="s", center_m=(4.0, 0.0), radius_m=0.3, height_m=3.0)
+    trunk = Obstacle(obstacle_id="t", center_m=np.array((4.0, 0.05)), radius_m=0.3, height_m=12.0)
+    beside = Obstacle(obstacle_id="b", center_m=np.array((4.0, 1.0)), radius_m=0.3, height_m=12.0)
+    short = Obstacle(obstacle_id="s", center_m=np.array((4.0, 0.0)), radius_m=0.3, height_m=3.0)
     cam = np.array([8.0, 0.0, 8.9])
     assert not line_of_sight_clear(cam, PERSON, (trunk,))
     assert line_of_sight_clear(cam, PERSON, (beside,))
@@ -108,7 +108,7 @@ def test_a_trunk_between_camera_and_person_blocks_the_line_of_sight():
 
 
 def test_a_blocked_person_is_in_frame_but_not_visible():
-    trunk = Obstacle(obstacle_id="t", center_m=(4.0, 0.0), radius_m=0.3, height_m=12.0)
+    trunk = Obstacle(obstacle_id="t", center_m=np.array((4.0, 0.0)), radius_m=0.3, height_m=12.0)
     view = view_person(
         pose=_looking_at_person(), center_m=PERSON, feet_m=FEET, head_m=HEAD, obstacles=(trunk,)
     )

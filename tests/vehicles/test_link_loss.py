@@ -21,7 +21,7 @@ def state(position, stamp=10.0, vehicle_id=2):
         vehicle_id=vehicle_id,
         stamp_s=stamp,
         position_m=position,
-        velocity_mps=(0, 0, 0),
+        velocity_mps=np.array((0, 0, 0)),
         yaw_rad=0.0,
         armed=True,
         in_air=True,

@@ -37,6 +37,7 @@ def read_until(proc: subprocess.Popen, pattern: str, *, timeout_s: float) -> tup
     seen = ""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
+        assert proc.stdout is not None
         line = proc.stdout.readline()
         if not line:
             break

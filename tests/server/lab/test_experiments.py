@@ -172,6 +172,7 @@ def test_resume_reuses_a_finished_run_only_for_the_same_simulator_config(tmp_pat
         exp.RunResult(spec=spec, report={"config": {}, "metrics": {"in_frame_fraction": 0.5}}), tmp_path
     )
     loaded = exp.load_run(spec, tmp_path)
+    assert loaded is not None and loaded.report is not None
     assert loaded.report["metrics"] == {"in_frame_fraction": 0.5}
     assert exp.load_run(dataclasses.replace(spec, duration_s=spec.duration_s + 1.0), tmp_path) is None
 
@@ -187,6 +188,7 @@ def test_resume_does_not_reuse_a_failed_run(tmp_path):
 
 def test_describe_ignores_non_finite_values_and_gives_quartiles():
     s = rep.describe([4.0, 1.0, math.nan, 3.0, 2.0, math.inf])
+    assert s is not None
     assert s.n == 4
     assert (s.mean, s.median, s.q25, s.q75) == pytest.approx((2.5, 2.5, 1.75, 3.25), abs=1e-12)
     assert s.iqr == pytest.approx(1.5, abs=1e-12)
@@ -194,7 +196,7 @@ def test_describe_ignores_non_finite_values_and_gives_quartiles():
 
 
 def test_describe_of_no_finite_value_is_none():
-    assert rep.describe([math.nan, None]) is None
+    assert rep.describe([math.nan, None, math.inf]) is None
 
 
 def test_flatten_names_nested_metrics_with_dots_and_drops_non_numbers():
@@ -362,7 +364,7 @@ def test_failed_runs_are_counted_and_left_out_of_the_statistics():
     results[0] = exp.RunResult(spec=results[0].spec, report=None, error="RuntimeError: boom")
     s = rep.summarize(p, results)
     assert (s.conditions[0].runs_ok, s.conditions[0].runs_failed) == (1, 1)
-    assert s.conditions[0].stat(rep.ERROR).mean == pytest.approx(2.0, abs=1e-12)
+    assert s.conditions[0].mean(rep.ERROR) == pytest.approx(2.0, abs=1e-12)
 
 
 # ---- report and figures from hand-made runs ----------------------------------------------------------------
@@ -571,7 +573,11 @@ def ordering(tmp_path_factory) -> dict[str, rep.FamilySummary]:
 
 
 def _mean(summary: rep.FamilySummary, metric: str, **settings) -> float:
-    return summary.find(**settings).mean(metric)
+    condition = summary.find(**settings)
+    assert condition is not None, settings
+    mean = condition.mean(metric)
+    assert mean is not None, metric
+    return mean
 
 
 @pytest.mark.slow

@@ -105,5 +105,5 @@ def test_bad_configs_are_refused_naming_the_field(kwargs, field):
 
 
 def test_trees_may_be_given_as_a_number():
-    assert SimConfig(trees=7).trees == "7"
+    assert SimConfig(**{"trees": 7}).trees == "7"  # a number, as JSON configs may hold it
     assert SimConfig(trees="NONE").trees == "none"

@@ -88,11 +88,13 @@ async def assert_refused(
 
 def horizontal_distances(station: GroundStation) -> np.ndarray:
     snap = station.snapshot()
+    assert snap.person_truth is not None
     person = snap.person_truth.position_m[:2]
     return np.array(
         [
             np.hypot(*(v.autopilot.position_m[:2] - person))
             for v in snap.vehicles
+            if v.autopilot is not None
             if v.phase == Phase.FORMATION
         ]
     )
@@ -100,12 +102,13 @@ def horizontal_distances(station: GroundStation) -> np.ndarray:
 
 def bearings_deg(station: GroundStation, ids) -> np.ndarray:
     snap = station.snapshot()
+    assert snap.person_truth is not None
     person = snap.person_truth.position_m
     return np.array(
         [
             math.degrees(math.atan2(*(v.autopilot.position_m[1::-1] - person[1::-1])))
             for v in snap.vehicles
-            if v.vehicle_id in ids
+            if v.autopilot is not None and v.vehicle_id in ids
         ]
     )
 

@@ -3,6 +3,8 @@ in tests/vehicles/px4/test_px4_e2e.py."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 import typer
 
@@ -35,8 +37,8 @@ def test_bad_vehicle_lists_are_refused_with_the_reason(kw, message):
         px4_urls(**kw)
 
 
-def _run(**overrides):
-    kw = dict(
+def _run(**overrides: Any) -> None:
+    kw: dict[str, Any] = dict(
         px4=[],
         sitl=0,
         origin=None,

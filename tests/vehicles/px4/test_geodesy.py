@@ -91,7 +91,7 @@ def test_local_frame_agrees_with_pymap3d_ned_to_geodetic_to_enu():
     rng = np.random.default_rng(4)
     for ned in rng.uniform(-200, 200, size=(20, 3)):
         lat, lon, alt = pymap3d.ned2geodetic(
-            *ned, origin.latitude_deg, origin.longitude_deg, origin.altitude_m
+            ned[0], ned[1], ned[2], origin.latitude_deg, origin.longitude_deg, origin.altitude_m
         )
         truth = geodetic_to_enu(GeodeticPoint(lat, lon, alt), reference=ZURICH)
         np.testing.assert_allclose(frame.to_enu(ned), truth, atol=1e-4)
@@ -124,7 +124,9 @@ def test_local_frame_yaw_round_trips_and_tilts_with_distance():
 def test_local_frame_from_fix_recovers_the_origin_within_a_millimetre():
     origin = GeodeticPoint(ZURICH.latitude_deg + 0.0005, ZURICH.longitude_deg + 0.0005, 495.0)
     ned = np.array([40.0, -25.0, -12.0])
-    lat, lon, alt = pymap3d.ned2geodetic(*ned, origin.latitude_deg, origin.longitude_deg, origin.altitude_m)
+    lat, lon, alt = pymap3d.ned2geodetic(
+        ned[0], ned[1], ned[2], origin.latitude_deg, origin.longitude_deg, origin.altitude_m
+    )
     frame = LocalFrame.from_fix(position=GeodeticPoint(lat, lon, alt), local_ned_m=ned, reference=ZURICH)
     exact = LocalFrame.from_origin(local_origin=origin, reference=ZURICH)
     np.testing.assert_allclose(frame.offset_m, exact.offset_m, atol=1e-3)
