@@ -432,8 +432,8 @@ def repulsion_inputs(
     if not within.any():
         return np.zeros(diff_xy.shape[1:])
     diff_xy, dist = diff_xy[within], dist[within]
-    d_max = d_max[within] if np.ndim(d_max) == 2 else d_max
-    tie_sign = tie_sign[within] if np.ndim(tie_sign) == 2 else tie_sign
+    d_max = d_max[within] if isinstance(d_max, np.ndarray) and d_max.ndim == 2 else d_max
+    tie_sign = tie_sign[within] if isinstance(tie_sign, np.ndarray) and tie_sign.ndim == 2 else tie_sign
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
     mag = np.asarray(
         cotangential_magnitude(

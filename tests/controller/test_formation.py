@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from numpy.typing import ArrayLike
 
 from controller.formation import FormationController
 from controller.messages import HorizonPlan, Obstacle, PersonEstimate, SolveStatus, VehicleState
@@ -18,7 +19,9 @@ FORMATION = FormationParams(d_des_m=8.0, h_des_m=8.0)
 PERSON_AT = np.array([0.0, 0.0, 0.9])
 
 
-def person(position=PERSON_AT, velocity=(0.0, 0.0, 0.0), stamp_s=0.0) -> PersonEstimate:
+def person(
+    position: ArrayLike = PERSON_AT, velocity: ArrayLike = (0.0, 0.0, 0.0), stamp_s=0.0
+) -> PersonEstimate:
     return PersonEstimate(
         stamp_s=stamp_s,
         position_m=np.asarray(position),

@@ -135,4 +135,4 @@ def test_takeoff_height_out_of_range_is_refused_and_counted():
     a.takeoff(float("nan"))
     a.takeoff(500.0)
     assert a.status().failed_commands == 2
-    assert "[0.5, 120]" in a.status().fault
+    assert "[0.5, 120]" in str(a.status().fault)

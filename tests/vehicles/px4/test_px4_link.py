@@ -54,7 +54,7 @@ def truth_enu(peer: Px4Peer) -> np.ndarray:
 
 
 @contextlib.asynccontextmanager
-async def px4_fleet(homes, *, team_origin=REF, config=CONFIG, **peer_kw):
+async def px4_fleet(homes, *, team_origin: GeodeticPoint | None = REF, config=CONFIG, **peer_kw):
     mavsdk.log_subscribe(lambda *a: True)
     ports = [free_udp_port() for _ in homes]
     peers = [

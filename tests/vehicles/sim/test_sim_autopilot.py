@@ -175,7 +175,9 @@ def test_battery_drains_by_one_twentieth_per_minute_in_the_air():
     ap, t = _airborne()
     before = ap.state().battery_fraction
     _run(ap, t, 60.0)
-    assert before - ap.state().battery_fraction == pytest.approx(60.0 / 1200.0, rel=1e-6)
+    after = ap.state().battery_fraction
+    assert before is not None and after is not None
+    assert before - after == pytest.approx(60.0 / 1200.0, rel=1e-6)
 
 
 def test_reported_position_is_the_true_one_plus_the_gps_drift():
