@@ -5,13 +5,10 @@ Every MAV fuses its own and its teammates' world-frame detections, each with its
 
 Motion model (docs/method.md#person-tracker, from the authors' code): the velocity decays exponentially, to
 `velocity_decay_fraction` of itself over `velocity_decay_time_s` (time constant tau = T / ln(1 / fraction),
-1.30 s by default), driven by white noise (an Ornstein-Uhlenbeck velocity). The noise is given as a standard
-deviation per square-root second, sigma_q (m/s/sqrt(s)): over a short dt the velocity's variance grows by
-sigma_q^2 dt (spectral density q = sigma_q^2, m^2/s^3). The original's "(0.5, 0.5, 0.1) per second" read as
-sigma_q is consistent: over 100 Monte-Carlo runs (seeds 100-199) of the walking person of
-tests/controller/test_tracker.py (2200 samples) the average position NEES is 2.96, inside its 95 % interval
-[2.90, 3.10]; read as variances (q = 0.5) it is 2.58, too cautious. On perfectly flat ground the vertical
-part is over-cautious (the model lets the person climb): 2.85 overall there.
+1.30 s by default), driven by white noise given as a standard deviation per square-root second, sigma_q
+(m/s/sqrt(s)): over a short dt the velocity's variance grows by sigma_q^2 dt (spectral density q = sigma_q^2,
+m^2/s^3). Read that way the authors' "(0.5, 0.5, 0.1) per second" is consistent (average NEES in its 95 %
+interval, tests/controller/test_tracker.py).
 
 Exact discretisation over dt, per axis, with b = exp(-dt / tau):
 

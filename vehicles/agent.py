@@ -6,13 +6,10 @@ return the set-point (position, velocity, yaw) plus the messages to broadcast (i
 its detections at once). No clocks, no I/O: the deterministic simulation and the live ground station drive the
 same `tick(now_s, inputs) -> outputs`.
 
-Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`. The roster (from the ground
-station: every in-formation MAV with its slot bearing 2 pi k / K about the person) stands in for what the
-link no longer carries. For every unheard teammate the agent passes the controller a *phantom* plan at that
-teammate's slot (about this MAV's own person estimate, moving with the person), and it asks the controller for
-its own slot bearing as the terminal reference. So a team that cannot talk still spreads out, and a MAV pushed
-out of its slot by a trunk is pushed back by its neighbours' phantoms before it reaches them: without any
-message, the slots are all a MAV can know about where its teammates are.
+Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`; an unheard teammate is stood in
+for by a *phantom* plan at its roster slot (2 pi k / K about this MAV's person estimate, moving with the
+person), and this MAV aims at its own slot, so a team that cannot talk still spreads out
+(docs/method.md#beyond-the-paper-the-team-without-its-links).
 
 Re-planning rate: by default the MPC is solved every control tick, as in the paper. With `replan_period_s`
 > 0 it is solved at most that often; in between, the set-point follows the latest plan (its state
