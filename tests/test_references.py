@@ -8,6 +8,7 @@ pages in docs/ are checked the same way. Documents that live outside the reposit
 from __future__ import annotations
 
 import re
+import subprocess
 from functools import cache
 from pathlib import Path
 
@@ -97,3 +98,14 @@ def test_nothing_cites_a_document_outside_the_repository():
         if OUTSIDE.search(line)
     ]
     assert hits == []
+
+
+def test_gitignore_lists_no_tracked_file():
+    done = subprocess.run(
+        ["git", "ls-files", "--cached", "--ignored", "--exclude-standard"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert done.stdout.split() == []
