@@ -160,12 +160,14 @@ def compared() -> list[tuple[str, MpcSolution, tuple[np.ndarray, np.ndarray, np.
     return results
 
 
+@pytest.mark.slow  # an independent CVXPY model of 30 random QPs
 def test_matches_cvxpy_inputs(compared):
     errors = [np.max(np.abs(sol.inputs_mps2 - ref[0])) for _, sol, ref in compared]
     assert all(sol.ok and sol.status == "solved" for _, sol, _ in compared)
     assert max(errors) < 1e-3
 
 
+@pytest.mark.slow  # an independent CVXPY model of 30 random QPs
 def test_matches_cvxpy_states(compared):
     errors = [
         max(np.max(np.abs(sol.positions_m - ref[1])), np.max(np.abs(sol.velocities_mps - ref[2])))
@@ -198,6 +200,7 @@ def test_reference_instances_include_saturated_inputs(compared):
     assert sum(saturated) >= 20
 
 
+@pytest.mark.slow  # an independent CVXPY model of 30 random QPs
 def test_max_state_violation_matches_cvxpy_slack(compared):
     """The reported violation is the reference plan's largest excursion beyond the soft bounds."""
     for _, sol, (_, p, v) in compared:

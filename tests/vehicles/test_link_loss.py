@@ -98,6 +98,7 @@ class Silenceable:
         self.inner.land()
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_mission_stops_steering_a_silent_vehicle_and_its_teammates_keep_clear_of_it():
     setup = build_sim(Scenario(vehicles=3, seed=2, person="still", trees="none"))
     wrapped = Silenceable(setup.autopilots[1])

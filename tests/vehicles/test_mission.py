@@ -68,6 +68,7 @@ def test_stopping_the_formation_makes_flying_vehicles_hold_within_one_period():
     assert not setup.mission.snapshot().formation_enabled
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_land_takes_effect_within_one_control_period_and_ends_landed():
     setup = _setup()
     t = _in_formation(setup)
@@ -82,6 +83,7 @@ def test_land_takes_effect_within_one_control_period_and_ends_landed():
     assert v.phase == Phase.LANDED and not v.autopilot.in_air and not v.autopilot.armed
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_teammates_of_a_landed_mav_respace_to_half_a_circle():
     setup = _setup()
     t = _in_formation(setup, 20.0)
