@@ -106,7 +106,7 @@ def sim(
         raise typer.Exit(code=2)
     if report is not None and not report.parent.exists():
         raise typer.BadParameter(f"directory {str(report.parent)!r} does not exist", param_hint="--report")
-    from server.lab.simulation import SimConfig, run_simulation  # heavy imports only once arguments are good
+    from server.lab.simulation import SimConfig, run_simulation  # the runner loads once the options are good
 
     try:
         config = SimConfig(
