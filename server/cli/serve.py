@@ -19,46 +19,14 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from controller.params import Method, ParameterError
+from server.cli.log_options import describe_log, log_header, log_path_option, open_log
 from server.cli.options import OPTION_OF_FIELD, MethodOption, Person, PersonMode, Rate, Seed, Trees, Vehicles
 from server.settings import RunSettings
 
 if TYPE_CHECKING:
     from server.flightlog.log import FlightLog
-    from server.flightlog.records import LogHeader
 
 log = logging.getLogger(__name__)
-
-
-def log_path_option(*, log_path: Path | None, no_log: bool) -> Path | None:
-    """Where `--log PATH` / `--no-log` put the flight log (None: no log); default runs/flight-<UTC>.jsonl."""
-    from server.flightlog.log import default_log_path
-
-    if log_path is not None and no_log:
-        raise typer.BadParameter("give either --log PATH or --no-log, not both", param_hint="--log")
-    return None if no_log else (log_path or default_log_path())
-
-
-def open_log(path: Path, *, header: LogHeader) -> FlightLog:
-    """Create the flight log at `path` and write its header; a path that cannot be written is refused."""
-    from server.flightlog.log import FlightLog
-
-    try:
-        return FlightLog.create(path, header=header)
-    except OSError as exc:
-        raise typer.BadParameter(
-            f"cannot write the flight log {path}: {exc.strerror or exc} (choose another "
-            "path with --log PATH, or --no-log)",
-            param_hint="--log",
-        ) from None
-
-
-def describe_log(flight_log: FlightLog) -> str:
-    """One line about a closed flight log: where, what it holds, and any records lost."""
-    lost = f"; {flight_log.write_errors} records could not be written" if flight_log.write_errors else ""
-    return (
-        f"flight log:     {flight_log.name} ({flight_log.samples} samples, {flight_log.commands} "
-        f"commands{lost}); replay with: skyring replay {flight_log.name}"
-    )
 
 
 def build_station(settings: RunSettings):
@@ -70,26 +38,6 @@ def build_station(settings: RunSettings):
     setup = build_sim(settings.scenario(), clock=time.perf_counter)
     return GroundStation(
         mission=setup.mission, control_period_s=1.0 / settings.rate_hz, camera=camera_view(setup.world.camera)
-    )
-
-
-def log_header(settings: RunSettings, *, command: str, speed: float, vehicle_urls: Sequence[str] = ()):
-    """The flight log's header: what this run flies."""
-    from server.flightlog.log import DEFAULT_SAMPLE_RATE_HZ, utc_now_iso
-    from server.flightlog.records import LogHeader
-
-    return LogHeader(
-        command=command,
-        vehicles=len(vehicle_urls) or settings.vehicles,
-        seed=settings.seed,
-        method=settings.method.value,
-        trees=settings.trees,
-        person=settings.person,
-        rate_hz=settings.rate_hz,
-        speed=speed,
-        sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
-        started_utc=utc_now_iso(),
-        vehicle_urls=tuple(vehicle_urls),
     )
 
 
@@ -172,6 +120,26 @@ def serve(
         ),
     ] = None,
     no_log: Annotated[bool, typer.Option("--no-log", help="do not write a flight log")] = False,
+    agents: Annotated[
+        str,
+        typer.Option(
+            help="in-process: every agent in this process (default); zenoh: supervise `skyring agent` "
+            "processes found on Zenoh (with --px4 URLs: a direct MAVLink link per vehicle for landing); "
+            "spawn: the one-laptop rehearsal (world here, one agent process per MAV)"
+        ),
+    ] = "in-process",
+    connect: Annotated[
+        list[str] | None, typer.Option(help="Zenoh endpoint to connect to (repeatable)")
+    ] = None,
+    listen: Annotated[
+        list[str] | None, typer.Option(help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    ] = None,
+    team: Annotated[str, typer.Option(help="team name: the Zenoh key prefix skyring/<team>/...")] = "skyring",
+    zenoh_config: Annotated[
+        Path | None,
+        typer.Option(help="Zenoh JSON5 config (TLS/mTLS, access control)", exists=True, dir_okay=False),
+    ] = None,
+    multicast: Annotated[bool, typer.Option(help="find agents by multicast scouting")] = True,
 ) -> None:
     """Run the ground station over the embedded simulation: 3-D operator view, REST API and state stream."""
     log_path = log_path_option(log_path=log, no_log=no_log)
@@ -181,6 +149,38 @@ def serve(
         )
     except ParameterError as exc:
         raise typer.BadParameter(exc.reason, param_hint=OPTION_OF_FIELD.get(exc.field, exc.field)) from None
+    if agents not in ("in-process", "zenoh", "spawn"):
+        raise typer.BadParameter(f"must be in-process, zenoh or spawn, got {agents!r}", param_hint="--agents")
+    if agents != "in-process":
+        from server.cli.agent import net_config
+        from server.cli.serve_agents import run_agents
+        from vehicles.px4.autopilot import sitl_urls
+
+        if px4_sitl and px4:
+            raise typer.BadParameter(
+                "give either --px4 URL ... or --px4-sitl N, not both", param_hint="--px4"
+            )
+        if px4_sitl:
+            px4 = sitl_urls(px4_sitl)
+
+        run_agents(
+            mode=agents,
+            config=net_config(
+                team=team, connect=connect, listen=listen, zenoh_config=zenoh_config, multicast=multicast
+            ),
+            vehicles=vehicles,
+            px4=[u.strip() for item in px4 or [] for u in item.split(",") if u.strip()],
+            origin=origin,
+            seed=settings.seed,
+            method=settings.method,
+            trees=settings.trees,
+            person=settings.person,
+            host=host,
+            port=port,
+            viser_port=viser_port,
+            log_path=log_path,
+        )
+        return
     if px4 or px4_sitl:
         run_px4(
             px4=px4 or [],
