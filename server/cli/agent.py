@@ -123,11 +123,10 @@ def agent(
     logging.basicConfig(
         level=logging.WARNING, format=f"%(levelname)s agent {vehicle_id} %(name)s: %(message)s"
     )
-    options = dict(
-        vehicle_id=vehicle_id, team_size=team_size, config=config, params=params, method=method, seed=seed
-    )
     if sim:
-        run_sim_agent(**options)
+        run_sim_agent(
+            vehicle_id=vehicle_id, team_size=team_size, config=config, params=params, method=method, seed=seed
+        )
     else:
         assert px4 is not None
         asyncio.run(
@@ -136,7 +135,12 @@ def agent(
                 origin=origin,
                 emulate_camera=emulate_camera,
                 person_epoch=person_epoch,
-                **options,
+                vehicle_id=vehicle_id,
+                team_size=team_size,
+                config=config,
+                params=params,
+                method=method,
+                seed=seed,
             )
         )
 
@@ -225,10 +229,10 @@ async def run_px4_agent(
         loop.add_signal_handler(sig, stop.set)
     try:
         await px4.connect()
-        home = px4.home
-        if reference is None and home is None:
+        team_origin = reference if reference is not None else px4.home
+        if team_origin is None:
             raise Px4Error("no home position to serve as the team origin; pass --origin lat,lon,alt")
-        px4.set_reference(reference or home)
+        px4.set_reference(team_origin)
         px4.use_stamp_clock(time.time)
         px4.start()
     except Px4Error as exc:
