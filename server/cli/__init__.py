@@ -35,6 +35,7 @@ COMMANDS: dict[str, str] = {
     "experiment": "server.cli.experiment:experiment",
     "replay": "server.cli.replay:replay",
     "agent": "server.cli.agent:agent",
+    "detect": "server.cli.detect:detect",
 }
 
 
