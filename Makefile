@@ -11,7 +11,7 @@ POSE_REQS := vehicles/detect/pose-requirements.txt
 POSE_PYTHON ?= $(shell for p in python3.12 python3.11; do command -v $$p >/dev/null 2>&1 && $$p -c 'import venv' 2>/dev/null && { echo $$p; break; }; done)
 FOOTAGE := /usr/share/doc/opencv-doc/examples/data/vtest.avi
 
-.PHONY: run test test-px4 bench lint chromium footage pose-env clean
+.PHONY: run test test-px4 check bench lint chromium footage pose-env clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -53,12 +53,17 @@ test-px4: $(STAMP)
 	@[ -x "$(PX4_SITL)" ] || { echo "PX4_SITL=$(PX4_SITL) is not an executable PX4 binary"; exit 2; }
 	PX4_SITL="$(abspath $(PX4_SITL))" $(PY) -m pytest -q -rP -p no:xdist -m px4_sitl --durations=0 tests/vehicles/px4
 
+# The fast part: no closed-loop runs, browser or end-to-end tests (they run in `make test` and CI).
+check: $(STAMP) footage $(POSE_STAMP)
+	$(PY) -m pytest -q -ra -n auto -m "not slow and not browser and not e2e"
+
 bench: $(STAMP)
 	$(VENV)/bin/skyring bench all
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check controller vehicles server webui tests
 	$(VENV)/bin/ruff format --check controller vehicles server webui tests
+	$(VENV)/bin/pyright
 
 clean:
 	rm -rf $(VENV) $(POSE_VENV) .pytest_cache

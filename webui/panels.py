@@ -14,7 +14,7 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import viser
@@ -134,7 +134,7 @@ class OperatorPanel:
             stop = gui.add_button("Stop formation (hold)", icon=viser.Icon.PLAYER_PAUSE)
             start.on_click(self._on_start)
             stop.on_click(
-                lambda e: self._run(
+                lambda e: self._do(
                     e.client,
                     lambda: actions.set_formation_enabled(False),
                     "Formation stopped: MAVs hold position",
@@ -225,7 +225,7 @@ class OperatorPanel:
             for obstacle_id in ids:
                 button = self._server.gui.add_button(f"Remove {obstacle_id}", icon=viser.Icon.TRASH)
                 button.on_click(
-                    lambda e, oid=obstacle_id: self._run(
+                    lambda e, oid=obstacle_id: self._do(
                         e.client, lambda: self._actions.remove_obstacle(oid), f"Obstacle {oid} removed"
                     )
                 )
@@ -248,6 +248,10 @@ class OperatorPanel:
         self.error_plot.data = (t, err)
 
     # ---- operator input ------------------------------------------------------------------------------------
+
+    def _do(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> None:
+        """`_run` for a button callback, which must return None."""
+        self._run(client, action, done)
 
     def _run(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> bool:
         """Run one operator action; tell the client the outcome. Never raises: a GUI callback must not die."""
@@ -410,7 +414,9 @@ def _set_range(slider: Any, low: float, high: float) -> None:
         slider.max = high
 
 
-def _notify(client: viser.ClientHandle | None, title: str, body: str, *, color: str) -> None:
+def _notify(
+    client: viser.ClientHandle | None, title: str, body: str, *, color: Literal["red", "green", "blue"]
+) -> None:
     if client is None:
         return
     try:

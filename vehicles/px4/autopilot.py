@@ -6,17 +6,17 @@ and reads the estimator origin; it adopts the vehicle in whatever state it is fo
 mode, flying, in a failsafe) and changes nothing until asked. `start()` then runs, on the event loop it was
 connected on, one reader task per telemetry stream into a state cache, a supervisor task
 (vehicles/px4/supervisor.py: engagement, the set-point watchdog, respect for a pilot and for PX4's failsafes)
-and a set-point streaming task. The `Autopilot` methods are
-non-blocking requests, safe to call from any thread.
+and a set-point streaming task. The `Autopilot` methods are non-blocking requests, safe to call from any
+thread.
 
 Frames: the team's ENU frame is converted to the vehicle's local NED frame here and nowhere else
-(vehicles/geodesy.py). Telemetry goes the other way. Link loss (no telemetry for `link_lost_after_s`) is
+(vehicles/px4/geodesy.py). Telemetry goes the other way. Link loss (no telemetry for `link_lost_after_s`) is
 reported in `AutopilotState.link_lost`.
 
 Take-off works from every mode PX4 can be in on the ground: after a disarm PX4 v1.16 returns to the last mode
 that allows arming (Offboard after an offboard flight), where it refuses to arm without a set-point stream;
-so skyring first asks for Hold (PX4 accepts that disarmed), then arms and takes off. What
-PX4 says reaches the state: its own mode name, whether it runs a failsafe (the critical system status of its
+so skyring first asks for Hold (PX4 accepts that disarmed), then arms and takes off. What PX4 says reaches
+the state: its own mode name, whether it runs a failsafe (the critical system status of its
 heartbeat) and why, whether it can arm, and why it refused (STATUSTEXT and, where the vehicle serves them,
 PX4 events; vehicles/px4/notices.py).
 """
@@ -56,6 +56,7 @@ if TYPE_CHECKING:
     from mavsdk.asyncio.plugins.offboard import OffboardAsync
     from mavsdk.asyncio.plugins.param import ParamAsync
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
 
 log = logging.getLogger(__name__)
 
@@ -274,7 +275,7 @@ def _geodetic(message) -> GeodeticPoint | None:
 class Px4Status:
     """The back-end's own view of one vehicle, for the ground station and logs.
 
-    engagement: vehicles/px4_supervisor.Engagement value; setpoint_age_s: age of the agent's last set-point;
+    engagement: `vehicles.px4.supervisor.Engagement` value; setpoint_age_s: age of the agent's last set-point;
     counters: set-points ignored (not engaged) or rejected (malformed), land/hold requests not sent because a
     pilot flies the vehicle, watchdog holds/landings, take-offs that failed (PX4 refused to arm, or no
     answer), commands PX4 refused or that timed out, telemetry readings dropped as malformed; frame_source:
@@ -422,14 +423,15 @@ class Px4Autopilot:
     async def _set_failsafe_params(self) -> None:
         from mavsdk.asyncio.plugins.param import ParamError
 
+        param = self._p.param
         for name, value in self.config.failsafe_params().items():
             try:
                 if isinstance(value, int):
-                    await self._p.param.set_param_int(name, value)
-                    readback = await self._p.param.get_param_int(name)
+                    await param.set_param_int(name, value)
+                    readback = await param.get_param_int(name)
                 else:
-                    await self._p.param.set_param_float(name, value)
-                    readback = await self._p.param.get_param_float(name)
+                    await param.set_param_float(name, value)
+                    readback = await param.get_param_float(name)
             except ParamError as exc:
                 raise Px4Error(f"vehicle {self.vehicle_id}: could not set {name} = {value}: {exc}") from exc
             if not math.isclose(readback, value, abs_tol=1e-4):
@@ -958,26 +960,27 @@ class Px4Autopilot:
     async def _command(self, command: Command) -> None:
         from mavsdk.asyncio.plugins.offboard import OffboardError
 
+        action, offboard = self._p.action, self._p.offboard
         if command is Command.TAKEOFF:
             # Hold first: PX4 accepts it disarmed and allows arming there, whichever mode it was left in
             # (after a disarm it returns to Offboard, where arming needs a set-point stream). Then arm and
             # take off, as before: PX4's navigator reads MIS_TAKEOFF_ALT when Takeoff mode starts, and asking
             # for Takeoff right after setting it has been seen to climb to the old 2.5 m.
-            await self._p.action.set_takeoff_altitude(self._takeoff_altitude_m())
-            await self._p.action.hold()
-            await self._p.action.arm()
-            await self._p.action.takeoff()
+            await action.set_takeoff_altitude(self._takeoff_altitude_m())
+            await action.hold()
+            await action.arm()
+            await action.takeoff()
         elif command is Command.START_OFFBOARD:
             if self._latest_setpoint is not None:
                 await self._forward(self._latest_setpoint)  # MAVSDK refuses to start without a set-point
-            await self._p.offboard.start()
+            await offboard.start()
         elif command is Command.HOLD:
             try:
-                await self._p.offboard.stop()  # stops MAVSDK's 20 Hz re-sending, then Hold
+                await offboard.stop()  # stops MAVSDK's 20 Hz re-sending, then Hold
             except OffboardError:
-                await self._p.action.hold()
+                await action.hold()
         elif command is Command.LAND:
-            await self._p.action.land()
+            await action.land()
 
     def _takeoff_altitude_m(self) -> float:
         """MIS_TAKEOFF_ALT (above home) that brings the vehicle to the requested team-frame height. Home
@@ -996,9 +999,10 @@ class Px4Autopilot:
     async def _stream(self) -> None:
         """Forward the agent's latest set-point while engaged, at most max_setpoint_rate_hz."""
         interval = 1.0 / self.config.max_setpoint_rate_hz
+        event = self._setpoint_event
         while True:
-            await self._setpoint_event.wait()
-            self._setpoint_event.clear()
+            await event.wait()
+            event.clear()
             if not self._supervisor.forwarding or self._latest_setpoint is None:
                 continue
             try:

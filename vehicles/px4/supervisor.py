@@ -128,12 +128,10 @@ class OffboardSupervisor:
         self.watchdog_landings = 0
         self.takeoff_failures = 0
         self.failsafe_landing = False  # landing because PX4 ran a failsafe while skyring flew it
-        self.stall_s: float | None = (
-            None  # how long the ground station stalled, when that started the landing
-        )
+        self.stall_s: float | None = None  # how long the ground station stalled, if that began the landing
         self._takeoff_failed_s: float | None = None  # a take-off that failed and waits to be tried again
         self._last_setpoint_s: float | None = None
-        self._stream_start_s: float | None = None
+        self._stream_start_s = -math.inf  # when the current uninterrupted set-point stream began
         self._streamed_since_engaged = False
         self._requests: list[tuple[str, float | None]] = []
         self._last_command: Command | None = None
@@ -341,7 +339,6 @@ class OffboardSupervisor:
         if (
             self._fresh(obs.now_s)
             and not obs.link_lost
-            and self._stream_start_s is not None
             and obs.now_s - max(self._stream_start_s, self._engaged_at_s) >= self.params.prestream_s
             and (self._last_command is not Command.START_OFFBOARD or self._retry_time(obs.now_s))
         ):
@@ -378,8 +375,8 @@ class OffboardSupervisor:
         if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD)):
             self._release(obs)
             return None
-        last = self._last_setpoint_s
-        if self._fresh(obs.now_s) and last is not None and last > self._last_command_s:
+        last_setpoint_s = self._last_setpoint_s
+        if self._fresh(obs.now_s) and last_setpoint_s is not None and last_setpoint_s > self._last_command_s:
             self._engage(obs)  # set-points after the hold: follow them again
             return None
         if self._due_retry(Command.HOLD, obs):

@@ -118,6 +118,7 @@ def test_pilot_mode_change_releases_without_fighting():
     cmds = run(sup, t, t + 5.0, FlightMode.MANUAL)
     assert cmds == []
     assert sup.engagement is Engagement.RELEASED
+    assert sup.released_reason is not None
     assert "manual" in sup.released_reason
     assert not sup.forwarding
     assert not sup.note_setpoint(t + 5.0)
@@ -223,7 +224,7 @@ def test_px4_failsafe_releases_before_the_watchdog_would_hold():
     # the ground station stalled: its set-points are stale AND PX4 went to Land on its own
     cmd = sup.step(obs(t + 2.0, FlightMode.LAND, failsafe=True))
     assert cmd is None
-    assert sup.released and "PX4 failsafe" in sup.released_reason
+    assert sup.released and sup.released_reason is not None and "PX4 failsafe" in sup.released_reason
     assert sup.watchdog_holds == 0 and sup.watchdog_landings == 0
 
 
