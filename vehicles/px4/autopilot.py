@@ -219,6 +219,12 @@ def check_setpoint(setpoint: object, *, max_range_m: float) -> str | None:
     return None
 
 
+def frozen(gap_s: float, cpu_s: float) -> bool:
+    """Whether a process stood frozen through a gap of gap_s seconds in which all its threads used cpu_s of
+    CPU: next to none (a stopped process uses none; a busy or starved one keeps using some)."""
+    return gap_s > 0.0 and cpu_s < 0.02 + 0.01 * gap_s
+
+
 def sitl_urls(count: int, *, first_port: int = 14540, host: str = "0.0.0.0") -> list[str]:
     """URLs for `count` local PX4 SITL instances: instance i sends to UDP 14540 + i (from i = 9 on: 14549)."""
     if count < 1:
@@ -323,7 +329,8 @@ class Px4Autopilot:
 
     clock: the wall clock the watchdog and link-loss detection run on (seconds, monotonic). AutopilotState
     stamps are on the same clock unless `use_stamp_clock` gives the caller's (e.g. a ground station's mission
-    time): a reading's age is then carried over to that clock.
+    time): a reading's age is then carried over to that clock. cpu_clock: the CPU time of the whole process
+    (all its threads, MAVSDK's included), which tells a frozen process from a busy or starved one.
     """
 
     def __init__(
@@ -333,11 +340,13 @@ class Px4Autopilot:
         url: str,
         config: Px4Config = Px4Config(),
         clock: Callable[[], float] = time.monotonic,
+        cpu_clock: Callable[[], float] = time.process_time,
     ) -> None:
         self.vehicle_id = int(vehicle_id)
         self.url = url
         self.config = config
         self._clock = clock
+        self._cpu_clock = cpu_clock
         self._cache = TelemetryCache()
         self._supervisor = OffboardSupervisor(config.supervisor)
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -356,7 +365,8 @@ class Px4Autopilot:
         self._refusal_fallback = ""
         self._failsafe_reports_seen = 0
         self._last_beat_s: float | None = None  # when the event loop last let `_beat` run
-        self._loop_gap_s = 0.0  # the longest the event loop stalled since the supervisor last looked
+        self._last_beat_cpu_s = 0.0  # the process's CPU time then
+        self._loop_gap_s = 0.0  # the longest the whole process stood frozen since the supervisor last looked
         self._executing = False
         self._stamp_clock: Callable[[], float] | None = None
 
@@ -574,8 +584,12 @@ class Px4Autopilot:
         )
 
     def _loop_stall_s(self, now: float) -> float:
-        """The longest the event loop stalled since the supervisor last looked, counting one in progress."""
-        running = 0.0 if self._last_beat_s is None else now - self._last_beat_s
+        """The longest the whole process stood frozen since the supervisor last looked, counting the gap
+        since the last beat when the process used next to no CPU in it (it was stopped, not busy)."""
+        running = 0.0
+        if self._last_beat_s is not None:
+            gap = now - self._last_beat_s
+            running = gap if frozen(gap, self._cpu_clock() - self._last_beat_cpu_s) else 0.0
         return max(self._loop_gap_s, running)
 
     def _stalled(self, now: float) -> bool:
@@ -896,15 +910,19 @@ class Px4Autopilot:
             )
 
     async def _beat(self) -> None:
-        """Measure how long the event loop stalls (the whole process frozen, or starved): a gap longer than
-        PX4's offboard-loss timeout means MAVSDK's set-points stopped too. Its own task, so a command the
-        supervisor awaits is not taken for a stall."""
+        """Measure how long the whole process stands frozen (stopped, suspended: every thread, MAVSDK's too),
+        so a gap longer than PX4's offboard-loss timeout means MAVSDK's set-points stopped as well. A loop
+        that is only busy or starved is no such freeze: the process uses CPU meanwhile, and MAVSDK's own
+        threads most likely kept sending (PX4's failsafe report would tell otherwise). Its own task, so a
+        command the supervisor awaits is not taken for a stall."""
         period = self.config.supervise_period_s
         while True:
-            now = self._clock()
+            now, cpu = self._clock(), self._cpu_clock()
             if self._last_beat_s is not None:
-                self._loop_gap_s = max(self._loop_gap_s, now - self._last_beat_s - period)
-            self._last_beat_s = now
+                gap = now - self._last_beat_s - period
+                if frozen(gap, cpu - self._last_beat_cpu_s):
+                    self._loop_gap_s = max(self._loop_gap_s, gap)
+            self._last_beat_s, self._last_beat_cpu_s = now, cpu
             await asyncio.sleep(period)
 
     async def _supervise(self) -> None:

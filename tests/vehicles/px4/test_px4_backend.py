@@ -13,6 +13,7 @@ from vehicles.px4.autopilot import (
     Px4Autopilot,
     Px4Config,
     check_setpoint,
+    frozen,
     ned_setpoint,
     sitl_urls,
     skyring_mode,
@@ -141,3 +142,11 @@ def test_takeoff_height_out_of_range_is_refused_and_counted():
     a.takeoff(500.0)
     assert a.status().failed_commands == 2
     assert "[0.5, 120]" in str(a.status().fault)
+
+
+def test_a_stopped_process_stood_frozen_a_busy_or_starved_one_did_not():
+    assert frozen(6.0, 0.0)  # SIGSTOP: no thread ran
+    assert frozen(2.5, 0.03)  # (the instants before and after the stop)
+    assert not frozen(2.5, 2.5)  # the event loop was busy: the process ran flat out
+    assert not frozen(2.5, 0.2)  # starved on a loaded machine, but MAVSDK's threads got some CPU
+    assert not frozen(0.0, 0.0)
