@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 import viser
 
-from controller.messages import Obstacle
 from webui.geometry import (
     box_segments,
     camera_wxyz,
@@ -23,7 +22,7 @@ from webui.geometry import (
     vehicle_color,
     yaw_wxyz,
 )
-from webui.view import SceneView, VehicleView
+from webui.view import ObstacleView, SceneView, VehicleView
 
 PERSON_TRUTH_COLOR = (230, 60, 60)
 PERSON_ESTIMATE_COLOR = (20, 20, 20)
@@ -50,7 +49,7 @@ class SceneRenderer:
         self.sigma = sigma
         self._vehicles: dict[int, dict[str, Any]] = {}
         self._plans: dict[int, Any] = {}
-        self._obstacles: dict[str, tuple[Obstacle, Any]] = {}
+        self._obstacles: dict[str, tuple[ObstacleView, Any]] = {}
         self._arena_key: tuple[float, ...] | None = None
         self._person_truth = scene.add_cylinder(
             "/person/truth", radius=0.25, height=PERSON_HEIGHT_M, color=PERSON_TRUTH_COLOR, visible=False
@@ -174,10 +173,11 @@ class SceneRenderer:
             return
         self._covariance.position = estimate.position_m
         self._covariance.wxyz = wxyz
-        self._covariance.scale = tuple(float(a) for a in np.maximum(semi_axes, 1e-3))
+        sx, sy, sz = (float(a) for a in np.maximum(semi_axes, 1e-3))
+        self._covariance.scale = (sx, sy, sz)
         self._covariance.visible = True
 
-    def _draw_obstacles(self, obstacles: tuple[Obstacle, ...]) -> None:
+    def _draw_obstacles(self, obstacles: tuple[ObstacleView, ...]) -> None:
         wanted = {o.obstacle_id: o for o in obstacles}
         for obstacle_id in list(self._obstacles):
             old, handle = self._obstacles[obstacle_id]
@@ -212,7 +212,7 @@ class SceneRenderer:
         self._circle.visible = True
 
 
-def _same_obstacle(a: Obstacle, b: Obstacle) -> bool:
+def _same_obstacle(a: ObstacleView, b: ObstacleView) -> bool:
     return (
         a.kind == b.kind
         and a.radius_m == b.radius_m

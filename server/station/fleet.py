@@ -29,6 +29,8 @@ from collections import OrderedDict, deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from controller.messages import Obstacle, SolveStatus
 from controller.params import ControllerParams, FormationParams
 from controller.tracker import TrackerStats
@@ -447,8 +449,8 @@ class AgentFleet:
             if s.setpoint is not None and s.setpoint_yaw_rad is not None:
                 setpoint = Setpoint(
                     stamp_s=utc,
-                    position_m=s.setpoint,
-                    velocity_mps=(0.0, 0.0, 0.0),
+                    position_m=np.array(s.setpoint, dtype=float),
+                    velocity_mps=np.zeros(3),
                     yaw_rad=s.setpoint_yaw_rad,
                 )
         except (ValueError, TypeError):
@@ -471,6 +473,9 @@ class AgentFleet:
             tracker=TrackerStats(**_known(s.tracker, TrackerStats)),
             counters=AgentCounters(**_known(s.counters, AgentCounters)),
             agent=link,
+            # flies the formation: its phase, and the plan it shares says so (a released or grounded agent's
+            # plan does not), and it is heard
+            in_formation=_phase(s) == Phase.FORMATION and plan is not None and plan.in_formation and not lost,
         )
 
     def _counters(self, vehicles: Sequence[VehicleSnapshot]) -> MissionCounters:

@@ -249,7 +249,7 @@ async def serve_station(
     (`server.station.api.gate.Gate`; default: open mode, allowed on loopback only); ssl_certfile /
     ssl_keyfile: serve HTTPS and WSS (PEM files).
     """
-    from server.station.api import create_app  # FastAPI/viser load only when serving
+    from server.station.api.app import create_app  # FastAPI/viser load only when serving
     from server.station.api.gate import LOOPBACK_NAMES, Gate
     from server.station.api.operator_page import TicketAccess
     from webui.app import OperatorUi

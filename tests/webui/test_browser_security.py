@@ -13,6 +13,7 @@ import http.server
 import json
 import re
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -136,7 +137,12 @@ def test_an_observer_watches_the_team_but_land_all_is_refused(secured_live, brow
         expect(frame.get_by_text("only an operator may command", exact=False)).to_be_visible()
         expect(frame.get_by_role("button", name="Confirm LAND ALL")).to_have_count(0)
         frame.get_by_text("Stop formation (hold)", exact=True).click()
-        expect(frame.get_by_text("only an operator may command", exact=False).nth(1)).to_be_visible()
+        deadline = time.monotonic() + 20.0
+        while len(audit_since(live, start)) < 2:  # the click reached the station and was refused
+            assert time.monotonic() < deadline, "the second refused command was not audited within 20 s"
+            time.sleep(0.1)
+        # notifications close after 6 s: on a loaded machine the first may be gone when the second shows
+        expect(frame.get_by_text("only an operator may command", exact=False).last).to_be_visible()
         assert digest(live) == before
         refused = [(r.command, r.operator, r.role, r.surface, r.accepted) for r in audit_since(live, start)]
         assert refused == [

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import viser
@@ -10,7 +12,7 @@ from controller.messages import Obstacle, PersonEstimate
 from controller.params import FormationParams
 from webui.panels import vehicle_card
 from webui.scene import SceneRenderer, vehicle_label
-from webui.view import Range, SceneView, VehicleView
+from webui.view import PersonEstimateView, Range, SceneView, VehicleView
 
 
 def vehicle(vehicle_id: int, *, phase: str = "formation", stale: bool = False) -> VehicleView:
@@ -36,19 +38,21 @@ def vehicle(vehicle_id: int, *, phase: str = "formation", stale: bool = False) -
 def view(*, obstacles=(), variances=(0.25, 0.04, 0.01)) -> SceneView:
     full = np.eye(6)
     full[:3, :3] = np.diag(variances)
-    estimate = PersonEstimate(stamp_s=1.0, position_m=[0.5, 0.0, 0.9], velocity_mps=[0.0, 0.0, 0.0], cov=full)
+    estimate = PersonEstimate(
+        stamp_s=1.0, position_m=np.array([0.5, 0.0, 0.9]), velocity_mps=np.array([0.0, 0.0, 0.0]), cov=full
+    )
     return SceneView(
         time_s=1.0,
         vehicles=(vehicle(1), vehicle(2, phase="landing")),
         obstacles=tuple(obstacles),
         formation=FormationParams(),
         formation_enabled=True,
-        arena_min_m=[-20, -20, 3],
-        arena_max_m=[20, 20, 10],
+        arena_min_m=np.array([-20, -20, 3]),
+        arena_max_m=np.array([20, 20, 10]),
         d_des_range_m=Range(1.8, 18.5),
         h_des_range_m=Range(2.1, 9.1),
-        person_truth_m=[0.0, 0.0, 0.9],
-        person_estimate=estimate,
+        person_truth_m=np.array([0.0, 0.0, 0.9]),
+        person_estimate=PersonEstimateView.of(estimate),
         estimate_source_id=1,
         tracking_error_m=0.5,
     )
@@ -71,8 +75,8 @@ def test_every_vehicle_gets_a_body_frustum_label_and_plan(scene):
 
 
 def test_trees_and_virtual_obstacles_are_drawn_in_different_colours(scene):
-    tree = Obstacle("t1", [4.0, -9.0], 0.3, 8.0, "tree")
-    virtual = Obstacle("v1", [-5.0, 5.0], 1.5, 12.0, "virtual")
+    tree = Obstacle("t1", np.array([4.0, -9.0]), 0.3, 8.0, "tree")
+    virtual = Obstacle("v1", np.array([-5.0, 5.0]), 1.5, 12.0, "virtual")
     SceneRenderer(scene).draw(view(obstacles=(tree, virtual)))
     drawn_tree = scene.get_handle_by_name("/obstacle/t1")
     drawn_virtual = scene.get_handle_by_name("/obstacle/v1")
@@ -82,7 +86,7 @@ def test_trees_and_virtual_obstacles_are_drawn_in_different_colours(scene):
 
 def test_a_removed_obstacle_disappears(scene):
     renderer = SceneRenderer(scene)
-    renderer.draw(view(obstacles=(Obstacle("v1", [-5.0, 5.0], 1.5, 12.0, "virtual"),)))
+    renderer.draw(view(obstacles=(Obstacle("v1", np.array([-5.0, 5.0]), 1.5, 12.0, "virtual"),)))
     renderer.draw(view())
     assert scene.get_handle_by_name("/obstacle/v1") is None
 
@@ -109,6 +113,32 @@ def test_label_shows_the_phase_of_a_mav_out_of_formation():
 
 def test_vehicle_card_shows_mode_solver_battery_and_a_stale_link():
     card = vehicle_card(vehicle(3, stale=True))
-    assert "mode offboard, armed, in air" in card
+    assert "autopilot offboard, armed, in air" in card
     assert "link 2.5 s **STALE**" in card and "solver 0.25 ms (solved)" in card and "battery 80 %" in card
     assert "STALE" not in vehicle_card(vehicle(3))
+
+
+def test_vehicle_card_shows_the_autopilots_own_mode_and_its_failsafe_with_its_reason():
+    v = dataclasses.replace(
+        vehicle(2),
+        autopilot_mode="LAND",
+        failsafe=True,
+        failsafe_reason="Failsafe activated: switching to Land",
+    )
+    card = vehicle_card(v)
+    assert "autopilot LAND" in card
+    assert "**FAILSAFE**: Failsafe activated: switching to Land" in card
+    assert "FAILSAFE" not in vehicle_card(vehicle(2))
+
+
+def test_vehicle_card_shows_why_the_autopilot_refused_to_arm_and_why_it_may_not_take_off_here():
+    v = dataclasses.replace(
+        vehicle(1, phase="takeoff"),
+        arming_refusal="Arming denied: Resolve system health failures first (Vehicle is in safety "
+        "configuration)",
+        takeoff_check="stands 3.0 m from the person, inside the 7.0 m keep-out (0.875 d_des)",
+    )
+    card = vehicle_card(v)
+    assert "**ARMING REFUSED**: Arming denied: Resolve system health failures first" in card
+    assert "safety configuration" in card
+    assert "**CANNOT TAKE OFF HERE**: stands 3.0 m from the person" in card

@@ -58,8 +58,16 @@ def commander(request: Request) -> Principal:
         status, detail = 401, "sign in as an operator to command the MAVs: POST /auth/login"
     else:
         status, detail = 403, f"{principal.name!r} is an {principal.role.value}: only an operator may command"
-    station_of(request).audit(principal, command, dict(request.path_params), accepted=False, message=detail)
+    arguments = {**request.path_params, **_query_arguments(request)}
+    station_of(request).audit(principal, command, arguments, accepted=False, message=detail)
     raise HTTPException(status, detail, headers={"X-Command-Id": principal.command_id})
+
+
+def _query_arguments(request: Request, *, most: int = 8, longest: int = 100) -> dict[str, str]:
+    """The query parameters of a refused command for its audit record (e.g. override=true), bounded: the
+    first `most`, each cut to `longest` characters."""
+    items = list(request.query_params.items())[:most]
+    return {k[:longest]: v[:longest] for k, v in items}
 
 
 Viewer = Annotated[Principal, Depends(viewer)]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Path, Request
+from fastapi import APIRouter, Path, Query, Request
 from fastapi.responses import Response
 from pydantic import TypeAdapter
 
@@ -30,6 +30,9 @@ LAND_ALL = TypeAdapter(LandAll)
 NOT_FOUND: Responses = {404: problem("no such vehicle or obstacle")}
 ObstacleId = Annotated[str, Path(min_length=1, max_length=64, description="e.g. v1")]
 VehicleId = Annotated[int, Path(ge=0, le=1_000_000, description="1..K")]
+Override = Annotated[
+    bool, Query(description="take off or join although the pre-take-off checks refuse a MAV (audited)")
+]
 
 router = APIRouter(prefix="/api", tags=["commands"], responses=COMMON_REFUSALS)
 
@@ -50,10 +53,20 @@ def set_formation(body: FormationRequest, request: Request, principal: Commander
     return _formation(request, principal)
 
 
-@router.post("/formation/start", response_model=FormationState, summary="Start formation control")
-def start_formation(request: Request, principal: Commander) -> Response:
+@router.post(
+    "/formation/start",
+    response_model=FormationState,
+    responses={
+        422: problem(
+            "refused: a malformed request, or a MAV waiting to take off stands inside the person's keep-out "
+            "or within d_min of a teammate (repeat with override=true to start anyway)"
+        )
+    },
+    summary="Start formation control",
+)
+def start_formation(request: Request, principal: Commander, override: Override = False) -> Response:
     with acting_as(principal):
-        station_of(request).set_formation_enabled(True)
+        station_of(request).set_formation_enabled(True, override=override)
     return _formation(request, principal)
 
 
@@ -100,12 +113,21 @@ def land(vehicle_id: VehicleId, request: Request, principal: Commander) -> Respo
 @router.post(
     "/vehicles/{vehicle_id}/release",
     response_model=VehicleView,
-    responses=NOT_FOUND,
-    summary="Give a landed MAV back to the formation",
+    responses={
+        **NOT_FOUND,
+        422: problem(
+            "refused: a malformed request; the MAV is not landed (nor airborne and free), is in its "
+            "autopilot's failsafe, the formation has no room for it, or it stands inside the person's "
+            "keep-out or within d_min of a teammate (repeat with override=true to release it anyway)"
+        ),
+    },
+    summary="Give a landed MAV (or an airborne one skyring does not fly) back to the formation",
 )
-def release(vehicle_id: VehicleId, request: Request, principal: Commander) -> Response:
+def release(
+    vehicle_id: VehicleId, request: Request, principal: Commander, override: Override = False
+) -> Response:
     with acting_as(principal):
-        station_of(request).release(vehicle_id)
+        station_of(request).release(vehicle_id, override=override)
     return _vehicle(request, vehicle_id, principal)
 
 

@@ -6,10 +6,11 @@ that falls behind skips frames (it always gets the newest); one whose send has n
 
 Commands: a text message `{"id": "...", "command": "land_all"}` (or set_formation with d_des_m and h_des_m,
 add_obstacle with x_m, y_m and radius_m, remove_obstacle with obstacle_id, land/release with vehicle_id,
-start_formation, stop_formation) is answered `{"reply_to": "...", "accepted": true|false, "detail": "...",
-"result": ...}`; it runs the same ground-station command on behalf of the signed-in operator and is audited
-(surface "ws") whether accepted or refused. The handshake is refused (HTTP 403) from a foreign origin and,
-when sign-in is required, without a session (cookie or bearer token).
+start_formation, stop_formation; release and start_formation take an optional `override`: true to take
+off although the pre-take-off checks refuse) is answered `{"reply_to": "...", "accepted": true|false,
+"detail": "...", "result": ...}`; it runs the same ground-station command on behalf of the signed-in
+operator and is audited (surface "ws") whether accepted or refused. The handshake is refused (HTTP 403)
+from a foreign origin and, when sign-in is required, without a session (cookie or bearer token).
 """
 
 from __future__ import annotations
@@ -57,18 +58,28 @@ class RemoveObstacle(_Command):
     obstacle_id: str = Field(min_length=1, max_length=64)
 
 
-class VehicleCommand(_Command):
-    command: Literal["land", "release"]
+class Land(_Command):
+    command: Literal["land"]
     vehicle_id: int
 
 
+class Release(_Command):
+    command: Literal["release"]
+    vehicle_id: int
+    override: bool = False
+
+
+class StartFormation(_Command):
+    command: Literal["start_formation"]
+    override: bool = False
+
+
 class TeamCommand(_Command):
-    command: Literal["land_all", "start_formation", "stop_formation"]
+    command: Literal["land_all", "stop_formation"]
 
 
-WsCommand = Annotated[
-    SetFormation | AddObstacle | RemoveObstacle | VehicleCommand | TeamCommand, Field(discriminator="command")
-]
+AnyCommand = SetFormation | AddObstacle | RemoveObstacle | Land | Release | StartFormation | TeamCommand
+WsCommand = Annotated[AnyCommand, Field(discriminator="command")]
 WS_COMMAND = TypeAdapter(WsCommand)
 
 
@@ -111,21 +122,22 @@ class StateFeed:
         return self._seq, self._frame
 
 
-def _run_command(
-    station: GroundStation,
-    command: SetFormation | AddObstacle | RemoveObstacle | VehicleCommand | TeamCommand,
-) -> object:
+def _run_command(station: GroundStation, command: AnyCommand) -> object:
     if isinstance(command, SetFormation):
         return station.set_formation(d_des_m=command.d_des_m, h_des_m=command.h_des_m)
     if isinstance(command, AddObstacle):
         return station.add_obstacle(x_m=command.x_m, y_m=command.y_m, radius_m=command.radius_m)
     if isinstance(command, RemoveObstacle):
         return station.remove_obstacle(command.obstacle_id)
-    if isinstance(command, VehicleCommand):
-        return (station.land if command.command == "land" else station.release)(command.vehicle_id)
+    if isinstance(command, Land):
+        return station.land(command.vehicle_id)
+    if isinstance(command, Release):
+        return station.release(command.vehicle_id, override=command.override)
+    if isinstance(command, StartFormation):
+        return station.set_formation_enabled(True, override=command.override)
     if command.command == "land_all":
         return station.land_all()
-    return station.set_formation_enabled(command.command == "start_formation")
+    return station.set_formation_enabled(False)
 
 
 def handle_command(station: GroundStation, principal: Principal, text: str) -> dict:

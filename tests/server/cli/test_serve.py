@@ -22,6 +22,8 @@ from server.station.api.users import user_line
 from server.station.live import bind_port
 from webui.access import Role
 
+pytestmark = pytest.mark.e2e  # starts `skyring serve` as a process and talks to it over HTTP
+
 ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -43,6 +45,7 @@ def read_until(proc: subprocess.Popen, pattern: str, *, timeout_s: float) -> tup
     assert proc.stdout is not None
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
+        assert proc.stdout is not None
         line = proc.stdout.readline()
         if not line:
             break

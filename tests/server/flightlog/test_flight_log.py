@@ -271,6 +271,7 @@ def _start_serve(path: Path, *extra: str) -> tuple[subprocess.Popen, str]:
 
 
 @pytest.mark.slow
+@pytest.mark.e2e  # starts `skyring serve` as a process
 def test_a_kill_9_loses_at_most_the_last_second_and_the_cut_log_replays(tmp_path):
     path = tmp_path / "killed.mcap"
     proc, api = _start_serve(path)
@@ -295,6 +296,7 @@ def test_a_kill_9_loses_at_most_the_last_second_and_the_cut_log_replays(tmp_path
     assert result.exit_code == 0 and "without an end record" in result.output
 
 
+@pytest.mark.e2e  # starts `skyring serve` as a process
 def test_serve_writes_its_flight_log_where_asked_and_prints_the_path(tmp_path):
     path = tmp_path / "serve.mcap"
     proc, _ = _start_serve(path, "--speed", "4")

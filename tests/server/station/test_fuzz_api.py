@@ -8,7 +8,7 @@ import schemathesis
 from hypothesis import HealthCheck, settings
 from schemathesis.specs.openapi.checks import positive_data_acceptance
 
-from server.station.api import create_app
+from server.station.api.app import create_app
 from server.station.ground_station import GroundStation
 from vehicles.sim.scenario import Scenario, build_sim
 

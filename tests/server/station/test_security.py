@@ -15,20 +15,23 @@ import websockets
 from test_api import RATE_HZ, make_station
 from websockets.typing import Origin
 
-from server.station.api import create_app
+from server.station.api.app import create_app
 from server.station.api.gate import SESSION_COOKIE, Gate
+from server.station.api.routes_stream import handle_command
 from server.station.api.users import Users, UsersError, hash_secret, user_line, verify_secret
-from webui.access import Role
+from webui.access import Principal, Role, Surface
 
 OPERATOR, OBSERVER = ("alice", "alice-secret-1"), ("bob", "bob-secret-22")
 MUTATING = [
     ("PUT", "/api/formation", {"d_des_m": 9.0, "h_des_m": 8.0}),
     ("POST", "/api/formation/start", None),
+    ("POST", "/api/formation/start?override=true", None),
     ("POST", "/api/formation/stop", None),
     ("POST", "/api/obstacles", {"x_m": 15.0, "y_m": -15.0, "radius_m": 1.0}),
     ("DELETE", "/api/obstacles/t1", None),
     ("POST", "/api/vehicles/1/land", None),
     ("POST", "/api/vehicles/1/release", None),
+    ("POST", "/api/vehicles/1/release?override=true", None),
     ("POST", "/api/land_all", None),
 ]
 
@@ -184,6 +187,63 @@ async def test_an_operator_commands_and_the_audit_names_them(station, users):
         "op-42",
         True,
     )
+
+
+async def test_an_observers_override_is_refused_and_audited_with_the_override_asked_for(station, users):
+    c = client(station, users)
+    token = await sign_in(c, *OBSERVER)
+    response = await c.post(
+        "/api/vehicles/2/release", params={"override": "true"}, headers={"authorization": f"Bearer {token}"}
+    )
+    assert response.status_code == 403
+    record = station.recent_audit[-1]
+    assert (record.command, record.arguments, record.accepted) == (
+        "release",
+        {"vehicle_id": "2", "override": "true"},  # as sent: refused before they were parsed
+        False,
+    )
+
+
+async def test_an_operators_override_is_an_audited_argument_of_the_command(station, users):
+    c = client(station, users)
+    token = await sign_in(c, *OPERATOR)
+    headers = {"authorization": f"Bearer {token}"}
+    response = await c.post("/api/formation/start", params={"override": "true"}, headers=headers)
+    assert response.status_code == 200, response.text
+    record = station.recent_audit[-1]
+    assert (record.command, record.arguments, record.operator, record.accepted) == (
+        "set_formation_enabled",
+        {"enabled": True, "override": True},
+        "alice",
+        True,
+    )
+    await c.post("/api/formation/start", headers=headers)
+    assert station.recent_audit[-1].arguments == {"enabled": True, "override": False}
+
+
+def test_a_websocket_command_carries_its_override_into_the_audit(station):
+    alice = Principal(name="alice", role=Role.OPERATOR, surface=Surface.WS, remote="192.0.2.7:5555")
+    message = {"id": "w2", "command": "start_formation", "override": True}
+    reply = handle_command(station, alice, json.dumps(message))
+    assert reply["accepted"], reply
+    record = station.recent_audit[-1]
+    assert (record.command, record.arguments, record.surface, record.command_id) == (
+        "set_formation_enabled",
+        {"enabled": True, "override": True},
+        "ws",
+        "w2",
+    )
+
+
+def test_a_websocket_override_that_is_not_a_boolean_is_refused_as_malformed(station):
+    alice = Principal(name="alice", role=Role.OPERATOR, surface=Surface.WS)
+    before = digest(station)
+    reply = handle_command(
+        station, alice, json.dumps({"id": "w3", "command": "release", "vehicle_id": 1, "override": "yes"})
+    )
+    assert not reply["accepted"] and "override" in reply["detail"]
+    assert digest(station) == before
+    assert (station.recent_audit[-1].command, station.recent_audit[-1].accepted) == ("release", False)
 
 
 async def test_signing_out_ends_the_session(station, users):

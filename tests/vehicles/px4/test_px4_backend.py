@@ -1,4 +1,5 @@
-"""The PX4 back-end's pure parts: set-point construction, mode reading, configuration (vehicles/px4.py)."""
+"""The PX4 back-end's pure parts: set-point construction, mode reading, configuration
+(vehicles/px4/autopilot.py)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from vehicles.px4.autopilot import (
     Px4Autopilot,
     Px4Config,
     check_setpoint,
+    frozen,
     ned_setpoint,
     sitl_urls,
     skyring_mode,
@@ -85,11 +87,11 @@ def test_check_setpoint_accepts_a_setpoint_near_the_team():
 
 
 def test_check_setpoint_refuses_a_far_setpoint_with_the_distance():
-    assert "2500 m" in check_setpoint(setpoint([2500.0, 0.0, 0.0]), max_range_m=2000.0)
+    assert "2500 m" in str(check_setpoint(setpoint([2500.0, 0.0, 0.0]), max_range_m=2000.0))
 
 
 def test_check_setpoint_refuses_what_is_not_a_setpoint():
-    assert "expected a Setpoint" in check_setpoint((1.0, 2.0, 3.0), max_range_m=2000.0)
+    assert "expected a Setpoint" in str(check_setpoint((1.0, 2.0, 3.0), max_range_m=2000.0))
 
 
 def test_sitl_urls_follow_px4_instance_ports():
@@ -99,8 +101,12 @@ def test_sitl_urls_follow_px4_instance_ports():
 
 def test_failsafe_params_are_typed_for_px4():
     params = Px4Config(offboard_loss_action=5, datalink_loss_action=1).failsafe_params()
-    assert params == {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 5, "NAV_DLL_ACT": 1}
+    assert params == {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 5, "NAV_DLL_ACT": 1, "COM_LOW_BAT_ACT": 2}
     assert isinstance(params["COM_OF_LOSS_T"], float) and isinstance(params["COM_OBL_RC_ACT"], int)
+
+
+def test_battery_failsafe_is_left_alone_when_asked():
+    assert "COM_LOW_BAT_ACT" not in Px4Config(low_battery_action=None).failsafe_params()
 
 
 @pytest.mark.parametrize(
@@ -108,6 +114,7 @@ def test_failsafe_params_are_typed_for_px4():
     [
         {"offboard_loss_action": 0},
         {"datalink_loss_action": 4},
+        {"low_battery_action": 1},
         {"link_lost_after_s": 0.0},
         {"connect_timeout_s": math.nan},
     ],
@@ -125,6 +132,7 @@ def test_unconnected_autopilot_has_no_state_and_refuses_commands_without_raising
     status = a.status()
     assert status.rejected_setpoints == 1
     assert status.failed_commands == 1
+    assert status.fault is not None
     assert "not connected" in status.fault
 
 
@@ -133,4 +141,12 @@ def test_takeoff_height_out_of_range_is_refused_and_counted():
     a.takeoff(float("nan"))
     a.takeoff(500.0)
     assert a.status().failed_commands == 2
-    assert "[0.5, 120]" in a.status().fault
+    assert "[0.5, 120]" in str(a.status().fault)
+
+
+def test_a_stopped_process_stood_frozen_a_busy_or_starved_one_did_not():
+    assert frozen(6.0, 0.0)  # SIGSTOP: no thread ran
+    assert frozen(2.5, 0.03)  # (the instants before and after the stop)
+    assert not frozen(2.5, 2.5)  # the event loop was busy: the process ran flat out
+    assert not frozen(2.5, 0.2)  # starved on a loaded machine, but MAVSDK's threads got some CPU
+    assert not frozen(0.0, 0.0)

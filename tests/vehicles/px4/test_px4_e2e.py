@@ -1,5 +1,5 @@
 """End to end: three PX4 test peers and the ground station of `skyring serve --px4`, in-process through the
-same code path as the command (server/px4_station.serve_px4), driven through its REST API."""
+same code path as the command (server/station/px4.py, `serve_px4`), driven through its REST API."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from vehicles.px4.geodesy import GeodeticPoint, geodetic_to_enu  # noqa: E402
 from vehicles.px4.supervisor import SupervisorParams  # noqa: E402
 from webui.panels import STALE_FLAG, vehicle_card  # noqa: E402
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.e2e
 
 REF = GeodeticPoint(47.397742, 8.545594, 488.0)
 D_DES_M = 8.0  # the formation default; the still person stands at the team origin
@@ -128,7 +128,8 @@ async def test_team_takes_off_forms_up_and_lands_on_land_all():
         await wait_until(
             lambda: all(p.landed and not p.armed for p in peers), timeout_s=20.0, what="landing all"
         )
-        assert all(p.mode_log()[-1][1] == "LAND" for p in peers)
+        # landed through PX4's Land; after the disarm PX4 returns to the last mode that allows arming
+        assert all([m for _, m in p.mode_log()][-2:] == ["LAND", "OFFBOARD"] for p in peers)
         for i, peer in enumerate(peers):
             seen = peer.setpoints()
             assert len(seen) > 20
@@ -152,7 +153,7 @@ async def test_frozen_agent_holds_within_a_second_then_lands_clear_of_its_teamma
             lambda: peers[1].landed and not peers[1].armed, timeout_s=20.0, what="its landing", every=watch
         )
         log = [(t - frozen_at, mode) for t, mode in peers[1].mode_log() if t >= frozen_at]
-        assert [mode for _, mode in log] == ["HOLD", "LAND"]
+        assert [mode for _, mode in log][:2] == ["HOLD", "LAND"]
         assert log[0][0] < 1.0
         assert closest[0] > 3.0
         assert all(p.mode is PeerMode.OFFBOARD for p in (peers[0], peers[2]))  # the others fly on
