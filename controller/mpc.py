@@ -28,6 +28,11 @@ layout: one slack per state component (x, y, z, vx, vy, vz) shared over the hori
 as slack_weight exceeds the summed multipliers of the component's bound rows. The quadratic slack term does
 not change that (its slope at s = 0 is zero) but gives OSQP curvature in s: with a purely linear penalty a
 cold solve took about 1100 iterations even with no bound active, with it about 200.
+
+Solvers (MpcParams.solver): "exact" (the default) is controller/qp.py: the unconstrained optimum in closed
+form whenever it provably solves the QP (almost every tick of a formation flight), otherwise the exact answer
+of a dense active-set solver (DAQP), warm-started. "osqp" is the OSQP set-up described above, kept as the
+reference the exact path is tested against (docs/fast-core.md has the measurements).
 """
 
 from __future__ import annotations
@@ -38,7 +43,11 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from controller.mpc_kernels import condensed_vectors, rollout
+from controller.qp import ExactQp
+
 EFFORT_MODES = ("hover", "planned", "raw")
+SOLVERS = ("exact", "osqp")
 ACCEPTED_STATUSES = ("solved", "solved inaccurate")
 # Any argument beyond this (m, m/s, m/s^2, or weight) is rejected: it is far outside any flight, and the
 # solver's data would leave OSQP's range (it takes 1e30 as infinity and silently ignores invalid updates).
@@ -57,11 +66,13 @@ class MpcParams:
     slack_weight: linear penalty per m (or m/s) of the largest violation of each state component's bounds;
     slack_quadratic_weight: its quadratic companion (per m^2), there for the solver's convergence.
 
-    Solver: eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its iteration cap, polishing
-    its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate" (the iteration cap was hit
-    with the residuals within OSQP's loosened tolerances) as ok: the plan is re-rolled through the exact
-    dynamics with inputs clipped into their box, so it is consistent and admissible, only less optimal, which
-    beats braking. Every other status (infeasible, cap hit far from a solution, non-convex) is a failure.
+    solver: "exact" (closed form when provably optimal, else DAQP; controller/qp.py) or "osqp" (the
+    reference). eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its iteration cap,
+    polishing its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate" (the
+    iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the plan is re-rolled
+    through the exact dynamics with inputs clipped into their box, so it is consistent and admissible, only
+    less optimal, which beats braking. Every other status (infeasible, cap hit far from a solution,
+    non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
     """
 
@@ -78,6 +89,7 @@ class MpcParams:
     terminal_position_weight: float = 100.0
     terminal_velocity_weight: float = 100.0
     effort: str = "hover"
+    solver: str = "exact"
     slack_weight: float = 1.0e4
     slack_quadratic_weight: float = 5.0e3
     eps_abs: float = 1.0e-5
@@ -94,6 +106,8 @@ class MpcParams:
             raise ValueError(f"dt_s must be a positive number of seconds, got {self.dt_s}")
         if self.effort not in EFFORT_MODES:
             raise ValueError(f"effort must be one of {EFFORT_MODES}, got {self.effort!r}")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         for name, lo, hi in (
             ("position", self.position_min_m, self.position_max_m),
             ("velocity", self.velocity_min_mps, self.velocity_max_mps),
@@ -122,15 +136,18 @@ class MpcParams:
 class MpcSolution:
     """One MPC solve (N = horizon_steps). When not ok, the arrays are NaN: apply `braking_plan` instead."""
 
-    ok: bool  # True only if OSQP solved and every number is finite
-    status: str  # OSQP's status string, or "invalid_input"
+    ok: bool  # True only if the solver solved and every number is finite
+    status: str  # the solver's status string ("solved" ...), or "invalid_input"
     message: str | None  # one line when not ok
     inputs_mps2: np.ndarray  # (N+1, 3) u(0..N), ENU, before gravity is added (hover: u_z = g)
     positions_m: np.ndarray  # (N+2, 3) x(0..N+1); x(0) = the given position
     velocities_mps: np.ndarray  # (N+2, 3)
     max_state_violation: float  # largest slack (m or m/s); 0 when no soft bound is active
-    iterations: int
-    solve_time_s: float  # OSQP's own run time: data update (re-factorisation), iterations, polish
+    iterations: int  # solver iterations (0: the exact solver's closed form)
+    solve_time_s: float  # the solver's own reported run time (OSQP: update, iterations, polish; exact: DAQP's
+    # time, 0 for the closed form, which takes microseconds and is not timed: the controller reads no clock)
+    path: str = "osqp"  # which solver produced it: "osqp", or the exact solver's "closed_form", "blocks",
+    # "active_set" (controller/qp.py)
 
 
 def predict(
@@ -249,6 +266,15 @@ class ModelPredictiveController:
         self._l_template, self._u_template = self._constant_bounds()
         self._p_rows, self._p_cols, self._p_indptr = self._p_pattern()
         self._shifts = [self._shift_permutations(k) for k in range(m)]
+        self._exact = params.solver == "exact"
+        self._a_dense = self._a_matrix.toarray()
+        self._resting = np.arange(self._n_var) >= self._nu
+        self._state_min_c = np.ascontiguousarray(self._state_min)
+        self._state_max_c = np.ascontiguousarray(self._state_max)
+        self._effort_code = EFFORT_MODES.index(params.effort)
+        self._default_w_terminal = np.diag(
+            [params.terminal_position_weight] * 3 + [params.terminal_velocity_weight] * 3
+        )
         self._setup_solver()
 
     @property
@@ -351,10 +377,21 @@ class ModelPredictiveController:
         scale = np.array([1.0, 1.0, 1.0] + [self._params.dt_s] * 3)
         return int(np.argmin(np.linalg.norm((plan[: self._n_steps] - x0) * scale, axis=1)))
 
+    def _exact_qp(self, w_terminal: np.ndarray) -> ExactQp:
+        """The exact solver for this terminal weight (P's upper triangle from `_p_data`, mirrored)."""
+        p = np.zeros((self._n_var, self._n_var))
+        p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
+        p = p + np.triu(p, 1).T
+        return ExactQp(p, self._a_dense, self._resting)
+
     def _setup_solver(self) -> None:
         prm = self._params
-        self._w_terminal = np.diag([prm.terminal_position_weight] * 3 + [prm.terminal_velocity_weight] * 3)
-        self._q_terminal = 2.0 * self._g_terminal.T @ self._w_terminal
+        self._w_terminal = self._default_w_terminal.copy()
+        self._q_terminal = np.ascontiguousarray(2.0 * self._g_terminal.T @ self._w_terminal)
+        self._warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # z, y, plan states (M+1, 6)
+        if self._exact:
+            self._qp = self._exact_qp(self._w_terminal)
+            return
         p_matrix = sp.csc_matrix(
             (self._p_data(self._w_terminal), self._p_rows, self._p_indptr), shape=(self._n_var, self._n_var)
         )
@@ -380,7 +417,6 @@ class ModelPredictiveController:
             check_termination=5,
             verbose=False,
         )
-        self._warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # z, y, plan states (M+1, 6)
 
     # ----------------------------------------------------------------------------------------------- solve
     def _solve_vectors(
@@ -402,6 +438,67 @@ class ModelPredictiveController:
         lo[self._lower_rows] -= free
         hi[self._upper_rows] -= free
         return q, lo, hi
+
+    def _solve_exact(self, x0: np.ndarray, reference: np.ndarray, f: np.ndarray) -> MpcSolution:
+        """The solve with ExactQp: vectors and rollout in compiled kernels (mpc_kernels.py)."""
+        prm = self._params
+        n = self._n_steps
+        q = np.empty(self._n_var)
+        lo = np.empty(self._l_template.shape[0])
+        hi = np.empty(self._l_template.shape[0])
+        condensed_vectors(
+            self._free_x0,
+            self._input_to_state,
+            self._q_terminal,
+            self._l_template,
+            self._u_template,
+            x0,
+            reference,
+            np.ascontiguousarray(f),
+            self._g,
+            self._effort_code,
+            prm.input_weight,
+            prm.slack_weight,
+            q,
+            lo,
+            hi,
+        )
+        result = self._qp.solve(q, lo, hi)
+        if not result.ok:
+            message = f"exact QP: {result.status} ({result.message})"
+            return self._failure(result.status, message, result.iterations, result.solve_time_s)
+        inputs = np.empty((n, 3))
+        positions = np.empty((n + 1, 3))
+        velocities = np.empty((n + 1, 3))
+        violation = rollout(
+            x0[:3],
+            x0[3:],
+            result.x[: self._nu].reshape(n, 3),
+            f,
+            self._g,
+            prm.dt_s,
+            self._input_min,
+            self._input_max,
+            self._state_min_c,
+            self._state_max_c,
+            inputs,
+            positions,
+            velocities,
+        )
+        if not np.isfinite(violation):
+            return self._failure("non_finite_plan", "the plan is not finite", result.iterations)
+        return MpcSolution(
+            ok=True,
+            status=result.status,
+            message=None,
+            inputs_mps2=inputs,
+            positions_m=positions,
+            velocities_mps=velocities,
+            max_state_violation=violation if violation > prm.violation_tolerance else 0.0,
+            iterations=result.iterations,
+            solve_time_s=result.solve_time_s,
+            path=result.path,
+        )
 
     def _failure(self, status: str, message: str, iterations: int = 0, time_s: float = 0.0) -> MpcSolution:
         n = self._n_steps
@@ -464,15 +561,23 @@ class ModelPredictiveController:
         if reasons:
             return self._failure("invalid_input", "; ".join(reasons))
 
-        w_terminal = np.zeros((6, 6))
-        w_terminal[:3, :3], w_terminal[3:, 3:] = wp, wv
+        if terminal_position_weight is None and terminal_velocity_weight is None:
+            w_terminal = self._default_w_terminal
+        else:
+            w_terminal = np.zeros((6, 6))
+            w_terminal[:3, :3], w_terminal[3:, 3:] = wp, wv
         if not np.array_equal(w_terminal, self._w_terminal):
-            self._w_terminal = w_terminal
-            self._q_terminal = 2.0 * self._g_terminal.T @ w_terminal
-            self._solver.update(Px=self._p_data(w_terminal))
+            self._w_terminal = w_terminal.copy()
+            self._q_terminal = np.ascontiguousarray(2.0 * self._g_terminal.T @ w_terminal)
+            if self._exact:
+                self._qp = self._exact_qp(w_terminal)
+            else:
+                self._solver.update(Px=self._p_data(w_terminal))
         x0 = np.concatenate([arrays["position_m"], arrays["velocity_mps"]])
         reference = np.concatenate([arrays["target_position_m"], arrays["target_velocity_mps"]])
         f = arrays["external_inputs_mps2"]
+        if self._exact:
+            return self._solve_exact(x0, reference, f)
         q, lo, hi = self._solve_vectors(x0, reference, f)
         self._solver.update(q=q, l=lo, u=hi)
         if self._warm is not None:
