@@ -31,11 +31,11 @@ from controller.fields import (
     ObstacleSet,
     TeammatePaths,
     covariance_radius_m,
-    external_inputs,
     plan_path,
     plan_velocities,
     teammate_paths,
 )
+from controller.fields_kernel import external_inputs_compiled
 from controller.messages import (
     ControlOutput,
     HorizonPlan,
@@ -355,7 +355,7 @@ class FormationController:
         if prm.reference.predict_person:
             person_v = np.asarray(tick.person.velocity_mps, dtype=float)
             person_p = person_p + person_v * (dt * np.arange(self._steps)[:, None])
-        ext = external_inputs(
+        ext = external_inputs_compiled(
             own_positions_m=own_path,
             person_position_m=person_p,
             teammates=mates,

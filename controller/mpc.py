@@ -67,12 +67,12 @@ class MpcParams:
     slack_quadratic_weight: its quadratic companion (per m^2), there for the solver's convergence.
 
     solver: "exact" (closed form when provably optimal, else DAQP; controller/qp.py) or "osqp" (the
-    reference). eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its iteration cap,
-    polishing its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate" (the
-    iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the plan is re-rolled
-    through the exact dynamics with inputs clipped into their box, so it is consistent and admissible, only
-    less optimal, which beats braking. Every other status (infeasible, cap hit far from a solution,
-    non-convex) is a failure.
+    reference). eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its (and DAQP's)
+    iteration cap, polishing its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate"
+    (the iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the plan is re-
+    rolled through the exact dynamics with inputs clipped into their box, so it is consistent and
+    admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
+    solution, non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
     """
 
@@ -382,7 +382,7 @@ class ModelPredictiveController:
         p = np.zeros((self._n_var, self._n_var))
         p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
         p = p + np.triu(p, 1).T
-        return ExactQp(p, self._a_dense, self._resting)
+        return ExactQp(p, self._a_dense, self._resting, iteration_limit=self._params.max_iterations)
 
     def _setup_solver(self) -> None:
         prm = self._params
