@@ -31,8 +31,6 @@ from controller.fields import (
     ObstacleSet,
     TeammatePaths,
     covariance_radius_m,
-    plan_path,
-    plan_velocities,
     teammate_paths,
 )
 from controller.fields_kernel import external_inputs_compiled
@@ -54,6 +52,7 @@ from controller.reference import (
     plan_state_at,
     terminal_reference,
 )
+from controller.teammates import TeammateView, align_rows
 
 DEFAULT_COV_M2 = np.eye(3) * 0.25
 
@@ -154,7 +153,7 @@ class FormationController:
         now_s: float,
         own: VehicleState,
         person: PersonEstimate | None,
-        teammates: Sequence[HorizonPlan],
+        teammates: Sequence[HorizonPlan] | TeammateView,
         obstacles: Sequence[Obstacle],
         formation: FormationParams,
         in_formation: bool = True,
@@ -162,7 +161,8 @@ class FormationController:
     ) -> ControlOutput:
         """Plan one control tick at now_s (s, the caller's clock); return the plan and the way-point.
 
-        teammates: the latest plan of each teammate (any age; in_formation ones count for K and the spacing);
+        teammates: the latest plan of each teammate (any age; in_formation ones count for K and the
+        spacing), or a view of a `TeammateTable` (plans checked on arrival, kept in arrays: teammates.py);
         obstacles: trees and virtual obstacles; formation: the operator's d_des / h_des; in_formation: False
         for a MAV that left formation control (its plan says so; it neither spaces itself nor steers its
         approach angle); preferred_bearing_rad: when given, the terminal reference lies at this ENU bearing
@@ -293,9 +293,22 @@ class FormationController:
             return self._last_position.copy(), np.zeros(3)
         return clip_into(np.zeros(3), lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
 
-    def _teammates(self, teammates: Sequence[HorizonPlan], now_s: float, own: VehicleState) -> TeammatePaths:
+    def _teammates(
+        self, teammates: Sequence[HorizonPlan] | TeammateView, now_s: float, own: VehicleState
+    ) -> TeammatePaths:
         """Teammates' plans on our horizon. Plans carrying our id, a non-finite stamp or step, or non-finite
-        numbers are dropped and counted."""
+        numbers are dropped and counted (a table refused those on arrival)."""
+        if isinstance(teammates, TeammateView):
+            mates = teammates.paths(
+                now_s=now_s,
+                dt_s=self._mpc_params.dt_s,
+                steps=self._steps,
+                own_cov_radius_m=self._own_cov_radius(own),
+                params=self._params.fields,
+                current_position_only=self._method == Method.PRICE,
+            )
+            self._counts["rejected_plans"] += mates.rejected
+            return mates
         usable = [
             p
             for p in teammates
@@ -342,9 +355,8 @@ class FormationController:
         prm = self._params
         dt = self._mpc_params.dt_s
         if self._prev_plan is not None:
-            own_path = plan_path(self._prev_plan, now_s=tick.now_s, dt_s=dt, steps=self._steps)
+            own_path, own_vel = self._previous_plan_on_horizon(tick.now_s)
             own_path = own_path + (tick.start_p - own_path[0])
-            own_vel = plan_velocities(self._prev_plan, now_s=tick.now_s, dt_s=dt, steps=self._steps)
         else:
             own_path = np.repeat(tick.start_p[None, :], self._steps, axis=0)
             own_vel = np.repeat(tick.start_v[None, :], self._steps, axis=0)
@@ -371,6 +383,26 @@ class FormationController:
         if ext.fault:
             self._counts["field_faults"] += 1
         return ext.total
+
+    def _previous_plan_on_horizon(self, now_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """The previous plan's positions and velocities (N+1, 3) at now_s + n dt (fields.plan_path and
+        plan_velocities, in one compiled call)."""
+        plan = self._prev_plan
+        assert plan is not None
+        both = np.stack([plan.positions_m, plan.velocities_mps])
+        out = np.empty((2, self._steps, 3))
+        align_rows(
+            both,
+            np.full(2, len(plan.positions_m), dtype=np.int64),
+            np.full(2, plan.stamp_s),
+            np.full(2, plan.dt_s),
+            np.arange(2),
+            float(now_s),
+            self._mpc_params.dt_s,
+            False,
+            out,
+        )
+        return out[0], out[1]
 
     def _target(
         self,

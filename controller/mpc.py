@@ -69,8 +69,8 @@ class MpcParams:
     solver: "exact" (closed form when provably optimal, else DAQP; controller/qp.py) or "osqp" (the
     reference). eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its (and DAQP's)
     iteration cap, polishing its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate"
-    (the iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the plan is re-
-    rolled through the exact dynamics with inputs clipped into their box, so it is consistent and
+    (the iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the plan is
+    re-rolled through the exact dynamics with inputs clipped into their box, so it is consistent and
     admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
     solution, non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.

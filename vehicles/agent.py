@@ -43,6 +43,7 @@ from controller.messages import (
     VehicleState,
 )
 from controller.params import ControllerParams, FormationParams
+from controller.teammates import TeammateTable
 from controller.tracker import PersonTracker, TrackerStats, Verdict
 from vehicles.autopilot import AutopilotState, Setpoint
 
@@ -154,8 +155,8 @@ class Agent:
         self._ap = agent_params or AgentParams()
         self._tracker = PersonTracker(params.tracker)
         self._controller = FormationController(vehicle_id=self.vehicle_id, params=params)
-        self._plans: dict[int, HorizonPlan] = {}
-        self._sorted_plans: tuple[HorizonPlan, ...] | None = None  # _plans by id, rebuilt after a change
+        # The teammates' latest plans, checked on arrival and kept in arrays (controller/teammates.py).
+        self._teammates = TeammateTable(own_id=self.vehicle_id, plan_length=params.mpc.horizon_steps + 2)
         self._last_publish_s = -math.inf
         self._search: tuple[float, float] | None = None  # (time, yaw command) while searching
         self._last_control: ControlOutput | None = None
@@ -168,10 +169,8 @@ class Agent:
 
     def teammate_plans(self, now_s: float) -> tuple[HorizonPlan, ...]:
         """The teammates' latest plans not older than teammate_timeout_s, by vehicle id."""
-        if self._sorted_plans is None:
-            self._sorted_plans = tuple(p for _, p in sorted(self._plans.items()))
         limit = now_s - self._ap.teammate_timeout_s
-        return tuple(p for p in self._sorted_plans if p.stamp_s >= limit)
+        return tuple(p for p in self._teammates.plans() if p.stamp_s >= limit)
 
     def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
         """Run one control tick at now_s."""
@@ -188,8 +187,8 @@ class Agent:
         # Between re-plans the estimate of the last re-plan serves (0.1 s old at 10 Hz: a 7 cm walk).
         person = self._last_person if following else self._tracker.estimate(now_s)
         self._last_person = person
-        teammates = self.teammate_plans(now_s)
-        known = sum(1 for p in teammates if p.in_formation)
+        since = now_s - self._ap.teammate_timeout_s
+        known = self._teammates.fresh_count(since)
         own = inputs.own
         setpoint = control = plan = None
         fault = None
@@ -201,8 +200,9 @@ class Agent:
         elif own is not None and inputs.role == AgentRole.FORMATION:
             slot = dict(inputs.roster).get(self.vehicle_id)
             used_slot = slot is not None and known < len(inputs.roster) - 1
+            phantoms: tuple[HorizonPlan, ...] = ()
             if used_slot and person is not None:
-                teammates = teammates + self._phantoms(now_s, person, inputs, teammates)
+                phantoms = self._phantoms(now_s, person, inputs, self._teammates.fresh_ids(since))
             try:
                 control = self._controller.step(
                     now_s=now_s,
@@ -215,7 +215,7 @@ class Agent:
                         position_cov_m2=own.position_cov_m2,
                     ),
                     person=person,
-                    teammates=teammates,
+                    teammates=self._teammates.view(since, phantoms),
                     obstacles=inputs.obstacles,
                     formation=inputs.formation,
                     in_formation=True,
@@ -301,10 +301,10 @@ class Agent:
         )
 
     def _phantoms(
-        self, now_s: float, person: PersonEstimate, inputs: AgentInputs, heard: tuple[HorizonPlan, ...]
+        self, now_s: float, person: PersonEstimate, inputs: AgentInputs, heard_ids: set[int]
     ) -> tuple[HorizonPlan, ...]:
-        """Plans at the roster slots of the in-formation teammates not heard from, moving with the person."""
-        heard_ids = {p.vehicle_id for p in heard if p.in_formation}
+        """Plans at the roster slots of the in-formation teammates not heard from (heard_ids: the fresh
+        in-formation plans' vehicle ids), moving with the person."""
         n = self._params.mpc.horizon_steps + 2
         dt = self._params.mpc.dt_s
         velocity = np.array([person.velocity_mps[0], person.velocity_mps[1], 0.0])
@@ -344,10 +344,9 @@ class Agent:
             if not (np.all(np.isfinite(msg.positions_m)) and np.isfinite(msg.stamp_s) and msg.dt_s > 0):
                 counts["rejected_messages"] += 1
                 return
+            if self._teammates.update(msg) == "refused":  # e.g. an absurd covariance
+                counts["rejected_messages"] += 1
+                return
             counts["plans_received"] += 1
-            old = self._plans.get(msg.vehicle_id)
-            if old is None or msg.stamp_s >= old.stamp_s:
-                self._plans[msg.vehicle_id] = msg
-                self._sorted_plans = None
         else:
             counts["rejected_messages"] += 1
