@@ -43,7 +43,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from controller.mpc_kernels import condensed_vectors, rollout
+from controller.mpc_kernels import CLOSED_FORM, INVALID, rollout, solve_fast
 from controller.qp import ExactQp
 
 EFFORT_MODES = ("hover", "planned", "raw")
@@ -386,7 +386,7 @@ class ModelPredictiveController:
 
     def _setup_solver(self) -> None:
         prm = self._params
-        self._w_terminal = self._default_w_terminal.copy()
+        self._w_terminal = self._default_w_terminal
         self._q_terminal = np.ascontiguousarray(2.0 * self._g_terminal.T @ self._w_terminal)
         self._warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # z, y, plan states (M+1, 6)
         if self._exact:
@@ -439,65 +439,101 @@ class ModelPredictiveController:
         hi[self._upper_rows] -= free
         return q, lo, hi
 
-    def _solve_exact(self, x0: np.ndarray, reference: np.ndarray, f: np.ndarray) -> MpcSolution:
-        """The solve with ExactQp: vectors and rollout in compiled kernels (mpc_kernels.py)."""
+    def _solve_exact(
+        self,
+        *,
+        position_m: np.ndarray,
+        velocity_mps: np.ndarray,
+        target_position_m: np.ndarray,
+        target_velocity_mps: np.ndarray,
+        external_inputs_mps2: np.ndarray,
+    ) -> MpcSolution | None:
+        """The solve with ExactQp: arithmetic in compiled kernels (mpc_kernels.py); the closed form in one
+        call. None when a number is not finite or implausible (the caller says which)."""
         prm = self._params
         n = self._n_steps
         q = np.empty(self._n_var)
         lo = np.empty(self._l_template.shape[0])
         hi = np.empty(self._l_template.shape[0])
-        condensed_vectors(
+        qp = self._qp
+        z = np.empty(self._n_var)
+        rows = np.empty(qp.row_count)
+        gradient = np.empty(qp.resting_count)
+        inputs = np.empty((n, 3))
+        positions = np.empty((n + 1, 3))
+        velocities = np.empty((n + 1, 3))
+        f = np.ascontiguousarray(external_inputs_mps2)
+        verdict, violation = solve_fast(
             self._free_x0,
             self._input_to_state,
             self._q_terminal,
             self._l_template,
             self._u_template,
-            x0,
-            reference,
-            np.ascontiguousarray(f),
+            position_m,
+            velocity_mps,
+            target_position_m,
+            target_velocity_mps,
+            f,
             self._g,
             self._effort_code,
             prm.input_weight,
             prm.slack_weight,
-            q,
-            lo,
-            hi,
-        )
-        result = self._qp.solve(q, lo, hi)
-        if not result.ok:
-            message = f"exact QP: {result.status} ({result.message})"
-            return self._failure(result.status, message, result.iterations, result.solve_time_s)
-        inputs = np.empty((n, 3))
-        positions = np.empty((n + 1, 3))
-        velocities = np.empty((n + 1, 3))
-        violation = rollout(
-            x0[:3],
-            x0[3:],
-            result.x[: self._nu].reshape(n, 3),
-            f,
-            self._g,
+            PLAUSIBLE_MAGNITUDE,
+            qp.kernel_data,
             prm.dt_s,
             self._input_min,
             self._input_max,
             self._state_min_c,
             self._state_max_c,
+            q,
+            lo,
+            hi,
+            z,
+            rows,
+            gradient,
             inputs,
             positions,
             velocities,
         )
+        if verdict == INVALID:
+            return None
+        path, iterations, time_s = "closed_form", 0, 0.0
+        if verdict != CLOSED_FORM:
+            result = qp.finish(q, lo, hi, False, z, rows, gradient)
+            if not result.ok:
+                message = f"exact QP: {result.status} ({result.message})"
+                return self._failure(result.status, message, result.iterations, result.solve_time_s)
+            path, iterations, time_s = result.path, result.iterations, result.solve_time_s
+            violation = rollout(
+                position_m,
+                velocity_mps,
+                result.x[: self._nu].reshape(n, 3),
+                f,
+                self._g,
+                prm.dt_s,
+                self._input_min,
+                self._input_max,
+                self._state_min_c,
+                self._state_max_c,
+                inputs,
+                positions,
+                velocities,
+            )
         if not np.isfinite(violation):
-            return self._failure("non_finite_plan", "the plan is not finite", result.iterations)
+            return self._failure("non_finite_plan", "the plan is not finite", iterations)
+        for arr in (inputs, positions, velocities):
+            arr.setflags(write=False)  # handed on (e.g. into a HorizonPlan) without a copy
         return MpcSolution(
             ok=True,
-            status=result.status,
+            status="solved",
             message=None,
             inputs_mps2=inputs,
             positions_m=positions,
             velocities_mps=velocities,
             max_state_violation=violation if violation > prm.violation_tolerance else 0.0,
-            iterations=result.iterations,
-            solve_time_s=result.solve_time_s,
-            path=result.path,
+            iterations=iterations,
+            solve_time_s=time_s,
+            path=path,
         )
 
     def _failure(self, status: str, message: str, iterations: int = 0, time_s: float = 0.0) -> MpcSolution:
@@ -547,6 +583,11 @@ class ModelPredictiveController:
             if arr.shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
             arrays[name] = arr
+        default_weights = terminal_position_weight is None and terminal_velocity_weight is None
+        if self._exact and default_weights and self._w_terminal is self._default_w_terminal:
+            solution = self._solve_exact(**arrays)  # checks the numbers itself, in the compiled kernel
+            if solution is not None:
+                return solution
         reasons = []
         values = np.concatenate([arr.ravel() for arr in arrays.values()])
         if not np.all(np.abs(values) <= PLAUSIBLE_MAGNITUDE):  # also False for NaN
@@ -561,23 +602,27 @@ class ModelPredictiveController:
         if reasons:
             return self._failure("invalid_input", "; ".join(reasons))
 
-        if terminal_position_weight is None and terminal_velocity_weight is None:
+        if default_weights:
             w_terminal = self._default_w_terminal
         else:
             w_terminal = np.zeros((6, 6))
             w_terminal[:3, :3], w_terminal[3:, 3:] = wp, wv
         if not np.array_equal(w_terminal, self._w_terminal):
-            self._w_terminal = w_terminal.copy()
+            self._w_terminal = w_terminal if default_weights else w_terminal.copy()
             self._q_terminal = np.ascontiguousarray(2.0 * self._g_terminal.T @ w_terminal)
             if self._exact:
                 self._qp = self._exact_qp(w_terminal)
             else:
                 self._solver.update(Px=self._p_data(w_terminal))
+        elif default_weights:
+            self._w_terminal = self._default_w_terminal
+        if self._exact:
+            solution = self._solve_exact(**arrays)
+            assert solution is not None  # the numbers were checked above
+            return solution
         x0 = np.concatenate([arrays["position_m"], arrays["velocity_mps"]])
         reference = np.concatenate([arrays["target_position_m"], arrays["target_velocity_mps"]])
         f = arrays["external_inputs_mps2"]
-        if self._exact:
-            return self._solve_exact(x0, reference, f)
         q, lo, hi = self._solve_vectors(x0, reference, f)
         self._solver.update(q=q, l=lo, u=hi)
         if self._warm is not None:

@@ -10,6 +10,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from controller.qp import closed_form_kernel
+
+# solve_fast's verdicts
+CLOSED_FORM = 0  # the closed form is the optimum; the plan is written
+NEEDS_SOLVER = 1  # a row or a resting gradient fails: q, lo, hi, z, rows, gradient are written for ExactQp
+INVALID = 2  # an argument is not finite or beyond `plausible`: nothing is written
+
 
 @numba.njit(cache=True)
 def condensed_vectors(
@@ -117,3 +124,91 @@ def rollout(
                 return np.nan
             worst = max(worst, excess)
     return worst
+
+
+@numba.njit(cache=True)
+def solve_fast(
+    free_x0,
+    input_to_state,
+    q_terminal,
+    l_template,
+    u_template,
+    position,
+    velocity,
+    target_position,
+    target_velocity,
+    f,
+    gravity,
+    effort,
+    input_weight,
+    slack_weight,
+    plausible,
+    qp_data,
+    dt,
+    input_min,
+    input_max,
+    state_min,
+    state_max,
+    q,
+    lo,
+    hi,
+    z,
+    rows,
+    gradient,
+    inputs,
+    positions,
+    velocities,
+):  # pragma: no cover - compiled; tested through ModelPredictiveController
+    """One MPC solve's arithmetic in one call: check the arguments, build q, lo, hi (`condensed_vectors`),
+    run ExactQp's step 1 (`closed_form_kernel`, qp_data = ExactQp.kernel_data) and, when it is the optimum,
+    roll the plan out (`rollout`). Returns (verdict, largest state-bound excursion)."""
+    for arr in (position, velocity, target_position, target_velocity):
+        for i in range(3):
+            if not abs(arr[i]) <= plausible:
+                return INVALID, 0.0
+    for n in range(f.shape[0]):
+        for i in range(3):
+            if not abs(f[n, i]) <= plausible:
+                return INVALID, 0.0
+    x0 = np.empty(6)
+    reference = np.empty(6)
+    for i in range(3):
+        x0[i], x0[3 + i] = position[i], velocity[i]
+        reference[i], reference[3 + i] = target_position[i], target_velocity[i]
+    condensed_vectors(
+        free_x0,
+        input_to_state,
+        q_terminal,
+        l_template,
+        u_template,
+        x0,
+        reference,
+        f,
+        gravity,
+        effort,
+        input_weight,
+        slack_weight,
+        q,
+        lo,
+        hi,
+    )
+    gain, a, rest_idx, p_rest, tol, opt_tol = qp_data
+    if not closed_form_kernel(gain, a, rest_idx, p_rest, tol, opt_tol, q, lo, hi, z, rows, gradient):
+        return NEEDS_SOLVER, 0.0
+    m = f.shape[0]
+    violation = rollout(
+        position,
+        velocity,
+        z[: 3 * m].reshape((m, 3)),
+        f,
+        gravity,
+        dt,
+        input_min,
+        input_max,
+        state_min,
+        state_max,
+        inputs,
+        positions,
+        velocities,
+    )
+    return CLOSED_FORM, violation

@@ -58,7 +58,9 @@ class QpResult:
 
 
 @numba.njit(cache=True)
-def _closed_form(gain, a, lo, hi, q, rest_idx, p_rest, tol, opt_tol, z, rows, gradient):  # pragma: no cover
+def closed_form_kernel(
+    gain, a, rest_idx, p_rest, tol, opt_tol, q, lo, hi, z, rows, gradient
+):  # pragma: no cover
     """Step 1 in one compiled pass over sparse (CSR) gain, A and P's resting rows: z = gain @ q, rows = A z,
     gradient = (P z + q)[resting]. Writes the three outputs; returns True when every row holds within tol and
     every resting gradient is >= -opt_tol. The sparsity is the per-axis split: no product with a zero."""
@@ -227,6 +229,20 @@ class ExactQp:
         """(n,) step 1's candidate for q (n,): -P_ff^-1 q_f on the free variables, 0 on the resting ones."""
         return self._gain @ q
 
+    @property
+    def kernel_data(self) -> tuple:
+        """The leading arguments of `closed_form_kernel` for this problem (sparse gain, A, resting rows of P,
+        tolerances), for callers that run step 1 inside their own compiled code and then call `finish`."""
+        return (self._gain_csr, self._a_csr, self._rest_idx, self._p_rest_csr, self._tol, self._opt_tol)
+
+    @property
+    def row_count(self) -> int:
+        return self._a.shape[0]
+
+    @property
+    def resting_count(self) -> int:
+        return self._rest_idx.shape[0]
+
     def solve(
         self,
         q: np.ndarray,
@@ -239,29 +255,34 @@ class ExactQp:
         """Minimise for q (n,), fixed-row bounds lo, hi (m0,) and optional extra rows (m1, n) with bounds
         (m1,). Bounds may be +-inf. Returns the exact minimiser (to DAQP's tolerances when step 2 or 3
         ran)."""
-        tol = self._tol
         z = np.empty(self.n)
         rows = np.empty(self._a.shape[0])
         gradient = np.empty(self._rest_idx.shape[0])
-        ok = _closed_form(
-            self._gain_csr,
-            self._a_csr,
-            lo,
-            hi,
-            q,
-            self._rest_idx,
-            self._p_rest_csr,
-            tol,
-            self._opt_tol,
-            z,
-            rows,
-            gradient,
-        )
+        ok = closed_form_kernel(*self.kernel_data, q, lo, hi, z, rows, gradient)
+        return self.finish(q, lo, hi, ok, z, rows, gradient, extra_a, extra_lo, extra_hi)
+
+    def finish(
+        self,
+        q: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        closed_form_ok: bool,
+        z: np.ndarray,
+        rows: np.ndarray,
+        gradient: np.ndarray,
+        extra_a: np.ndarray | None = None,
+        extra_lo: np.ndarray | None = None,
+        extra_hi: np.ndarray | None = None,
+    ) -> QpResult:
+        """Steps 2 and 3 after step 1 ran (`closed_form_kernel`: its verdict and its outputs z (n,), rows
+        (m0,), gradient (resting,), which this may overwrite); the extra rows are checked here."""
+        tol = self._tol
+        ok = closed_form_ok
         extra = extra_a is not None and extra_a.shape[0] > 0
-        if extra:
+        if extra and ok:
             assert extra_a is not None and extra_lo is not None and extra_hi is not None
             extra_rows = extra_a @ z
-            ok = ok and not ((extra_rows < extra_lo - tol) | (extra_rows > extra_hi + tol)).any()
+            ok = not ((extra_rows < extra_lo - tol) | (extra_rows > extra_hi + tol)).any()
         if ok:
             return QpResult(x=z, status="solved", path="closed_form", iterations=0)
         bad_rows = (rows < lo - tol) | (rows > hi + tol)
