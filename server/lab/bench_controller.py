@@ -46,8 +46,8 @@ def _fly(team_size: int, ticks: int, *, record: bool):
     """Run a K-MAV closed loop at RATE_HZ (vehicles follow their plans exactly); time MAV 0's ticks once
     `record`.
 
-    Returns ((T, 4) [tracker s, controller step s, whole tick s, detections fused], MPC instances of MAV 0 as
-    solve() keyword dicts)."""
+    Returns ((T, 5) [tracker s, controller step s, whole tick s, detections fused, whole tick CPU s], MPC
+    instances of MAV 0 as solve() keyword dicts)."""
     params = ControllerParams()
     formation = FormationParams()
     person = PathPerson(path_xy_m=paper_path())
@@ -80,6 +80,7 @@ def _fly(team_size: int, ticks: int, *, record: bool):
             own = VehicleState(vehicle_id=k, stamp_s=now, position_m=pos[k], velocity_mps=vel[k])
             mates = tables[k].view(now - 3.0)
             if k == 0:
+                c0 = time.thread_time()
                 t0 = time.perf_counter()
                 for det in detections:
                     tracker.update(det)
@@ -89,8 +90,9 @@ def _fly(team_size: int, ticks: int, *, record: bool):
                     now_s=now, own=own, person=estimate, teammates=mates, obstacles=trees, formation=formation
                 )
                 t2 = time.perf_counter()
+                c2 = time.thread_time()
                 if record and tick >= warm:
-                    times.append((t1 - t0, t2 - t1, t2 - t0, len(detections)))
+                    times.append((t1 - t0, t2 - t1, t2 - t0, len(detections), c2 - c0))
                     if estimate is not None:
                         instances.append(_instance(out, estimate, formation, params))
             else:
@@ -108,7 +110,7 @@ def _fly(team_size: int, ticks: int, *, record: bool):
                 out.plan.positions_m, out.plan.velocities_mps, elapsed_s=dt, dt_s=out.plan.dt_s
             )
             pos[k], vel[k] = p, v
-    return np.array(times).reshape(-1, 4), instances
+    return np.array(times).reshape(-1, 5), instances
 
 
 def _instance(out, estimate: PersonEstimate, formation: FormationParams, params: ControllerParams) -> dict:
@@ -171,14 +173,14 @@ def _cvxpy_problem(params: MpcParams):
     )
     problem = cp.Problem(cp.Minimize(cost), constraints)
 
-    def solve(case: dict, solver: str, *, tight: bool) -> tuple[float, np.ndarray]:
+    def solve(case: dict, solver: str, *, tight: bool) -> tuple[float, np.ndarray, float]:
         x0.value, v0.value = case["position_m"], case["velocity_mps"]
         p_ref.value, v_ref.value = case["target_position_m"], case["target_velocity_mps"]
         f.value = case["external_inputs_mps2"]
         options = dict(eps_abs=1e-10, eps_rel=1e-10, max_iter=200_000, polishing=True) if tight else {}
-        t0 = time.perf_counter()
+        c0, t0 = time.thread_time(), time.perf_counter()
         problem.solve(solver=solver, **options)
-        return time.perf_counter() - t0, np.asarray(u.value)
+        return time.perf_counter() - t0, np.asarray(u.value), time.thread_time() - c0
 
     return solve
 
@@ -190,29 +192,35 @@ def _compare_with_cvxpy(instances: list[dict]) -> None:
     except ImportError:
         print("  CVXPY is not installed (a test extra): comparison skipped")
         return
-    timed: dict[str, tuple[list[float], list[np.ndarray]]] = {}
+    timed: dict[str, tuple[list[float], list[float], list[np.ndarray]]] = {}
     for solver in ("exact", "osqp"):
         ours = ModelPredictiveController(MpcParams(solver=solver))
-        elapsed, first = [], []
+        elapsed, cpu, first = [], [], []
         for case in instances:
-            t0 = time.perf_counter()
+            c0, t0 = time.thread_time(), time.perf_counter()
             sol = ours.solve(**case)
             elapsed.append(time.perf_counter() - t0)
+            cpu.append(time.thread_time() - c0)
             first.append(sol.inputs_mps2[0])
-        timed[solver] = (elapsed, first)
+        timed[solver] = (elapsed, cpu, first)
     cvx = [solve_cvx(case, "OSQP", tight=False) for case in instances]
     cvx_tight = [solve_cvx(case, "OSQP", tight=True) for case in instances]
     cvx_median = float(np.median([r[0] for r in cvx]))
+    cvx_cpu = float(np.median([r[2] for r in cvx]))
     print(f"MPC solve vs CVXPY, the same {len(instances)} QPs (K = 16 flight at 100 Hz, in sequence):")
-    print(f"  CVXPY + OSQP (defaults)             median {1e3 * cvx_median:8.4f} ms")
+    print(
+        f"  CVXPY + OSQP (defaults)             median {1e3 * cvx_median:8.4f} ms  (CPU {1e3 * cvx_cpu:.4f} ms)"
+    )
     for solver, label in (("exact", "ours, exact (closed form / DAQP)"), ("osqp", "ours, OSQP (built once)")):
-        elapsed, first = timed[solver]
+        elapsed, cpu, first = timed[solver]
         ratio = cvx_median / float(np.median(elapsed))
+        cpu_ratio = cvx_cpu / float(np.median(cpu))
         diff = max(float(np.abs(f - r[1][0]).max()) for f, r in zip(first, cvx_tight, strict=True))
         verdict = "met" if solver != "exact" or (ratio >= TARGET_MPC_RATIO and diff <= 1e-6) else "NOT met"
         print(
-            f"  {label:<35} median {1e3 * np.median(elapsed):8.4f} ms   CVXPY / ours = {ratio:7.1f}x   "
-            f"max |u(0) - u(0) of CVXPY + OSQP at 1e-10| = {diff:.1e} m/s^2"
+            f"  {label:<35} median {1e3 * np.median(elapsed):8.4f} ms  (CPU {1e3 * np.median(cpu):.4f} ms)   "
+            f"CVXPY / ours = {ratio:6.1f}x wall, {cpu_ratio:6.1f}x CPU   max |u(0) - u(0) of CVXPY + OSQP "
+            f"at 1e-10| = {diff:.1e} m/s^2"
             + (f"   target >= {TARGET_MPC_RATIO:g}x and 1e-6: {verdict}" if solver == "exact" else "")
         )
     loose = max(float(np.abs(f - r[1][0]).max()) for f, r in zip(timed["exact"][1], cvx, strict=True))
@@ -220,30 +228,34 @@ def _compare_with_cvxpy(instances: list[dict]) -> None:
 
 
 def run(*, repeats: int) -> None:
-    """Time `repeats` ticks of MAV 0 for each team size, then compare the K = 16 QPs with CVXPY."""
+    """Time `repeats` ticks of MAV 0 for each team size, then compare the K = 16 QPs with CVXPY.
+
+    Wall time is what the targets are about; the thread's CPU time is printed beside it because on a shared
+    machine the wall time also counts the time other processes had the core."""
     ticks = max(int(repeats), 20)
     print(
         f"controller tick (detections fused + estimate + teammates + external inputs + MPC + way-point), one "
         f"MAV, {RATE_HZ:g} Hz, paper path and 13 trees, {ticks} ticks after {WARMUP_S:g} s:"
     )
     print(
-        "     K   tick median ms   tick p99 ms   (tracker median ms, controller step median ms, "
-        "detections/tick, tick median ms with a detection)"
+        "     K   wall median ms   wall p99 ms   CPU median ms   CPU p99 ms   (tracker, controller step "
+        "wall medians ms; detections per tick)"
     )
     instances: list[dict] = []
     median_16 = p99_16 = float("nan")
     for team_size in TEAM_SIZES:
         times, recorded = _fly(team_size, ticks, record=True)
         median, p99 = 1e3 * np.median(times[:, 2]), 1e3 * np.percentile(times[:, 2], 99)
+        cpu_median, cpu_p99 = 1e3 * np.median(times[:, 4]), 1e3 * np.percentile(times[:, 4], 99)
         parts = 1e3 * np.median(times[:, :2], axis=0)
-        with_det = times[times[:, 3] > 0, 2]
-        det_median = 1e3 * np.median(with_det) if len(with_det) else float("nan")
         print(
-            f"  {team_size:4d}   {median:14.3f}   {p99:11.3f}   ({parts[0]:.3f}, {parts[1]:.3f}, "
-            f"{np.mean(times[:, 3]):.2f}, {det_median:.3f})"
+            f"  {team_size:4d}   {median:14.3f}   {p99:11.3f}   {cpu_median:13.3f}   {cpu_p99:10.3f}   "
+            f"({parts[0]:.3f}, {parts[1]:.3f}; {np.mean(times[:, 3]):.2f})"
         )
         if team_size == 16:
             instances, median_16, p99_16 = recorded, median, p99
     verdict = "met" if median_16 <= TARGET_MEDIAN_MS and p99_16 <= TARGET_P99_MS else "NOT met"
-    print(f"  target: median <= {TARGET_MEDIAN_MS} ms and p99 <= {TARGET_P99_MS} ms at K = 16: {verdict}")
+    print(
+        f"  target: wall median <= {TARGET_MEDIAN_MS} ms and p99 <= {TARGET_P99_MS} ms at K = 16: {verdict}"
+    )
     _compare_with_cvxpy(instances[: max(20, min(len(instances), ticks))])
