@@ -48,7 +48,6 @@ from controller.reference import (
     bearing_rad,
     clip_into,
     initial_state,
-    input_displacement,
     plan_state_at,
     terminal_reference,
 )
@@ -125,6 +124,12 @@ class FormationController:
         self._obstacle_dropped = 0
         self._cov_key: bytes | None = None
         self._cov_radius = 0.0
+        dt = mpc_params.dt_s
+        self._step_times = dt * np.arange(self._steps)[:, None]  # (N+1, 1) n dt
+        # input_displacement's weights dt^2 (N - n + 1/2), computed once
+        self._displacement_weights = dt * dt * (self._steps - 1 - np.arange(self._steps) + 0.5)
+        self._prev_rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._two_rows = np.arange(2)
         self.reset()
 
     @property
@@ -353,7 +358,6 @@ class FormationController:
     ) -> np.ndarray:
         """(N+1, 3) clamped external inputs on the previous plan, moved to begin at the start state."""
         prm = self._params
-        dt = self._mpc_params.dt_s
         if self._prev_plan is not None:
             own_path, own_vel = self._previous_plan_on_horizon(tick.now_s)
             own_path = own_path + (tick.start_p - own_path[0])
@@ -366,7 +370,7 @@ class FormationController:
         person_p = np.asarray(tick.person.position_m, dtype=float)
         if prm.reference.predict_person:
             person_v = np.asarray(tick.person.velocity_mps, dtype=float)
-            person_p = person_p + person_v * (dt * np.arange(self._steps)[:, None])
+            person_p = person_p + person_v * self._step_times
         ext = external_inputs_compiled(
             own_positions_m=own_path,
             person_position_m=person_p,
@@ -389,18 +393,18 @@ class FormationController:
         plan_velocities, in one compiled call)."""
         plan = self._prev_plan
         assert plan is not None
-        both = np.stack([plan.positions_m, plan.velocities_mps])
+        if self._prev_rows is None or self._prev_rows[0] is not plan.positions_m:
+            self._prev_rows = (
+                plan.positions_m,
+                np.stack([plan.positions_m, plan.velocities_mps]),
+                np.full(2, len(plan.positions_m), dtype=np.int64),
+                np.full(2, plan.stamp_s),
+                np.full(2, plan.dt_s),
+            )
+        _, both, lengths, stamps, dts = self._prev_rows
         out = np.empty((2, self._steps, 3))
         align_rows(
-            both,
-            np.full(2, len(plan.positions_m), dtype=np.int64),
-            np.full(2, plan.stamp_s),
-            np.full(2, plan.dt_s),
-            np.arange(2),
-            float(now_s),
-            self._mpc_params.dt_s,
-            False,
-            out,
+            both, lengths, stamps, dts, self._two_rows, float(now_s), self._mpc_params.dt_s, False, out
         )
         return out[0], out[1]
 
@@ -431,7 +435,8 @@ class FormationController:
             preferred_bearing_rad=preferred_bearing_rad,
         )
         if ref.pass_through and not price:
-            shift_p, shift_v = input_displacement(f_total, dt_s=mp.dt_s)
+            # reference.input_displacement with its weights computed once
+            shift_p, shift_v = self._displacement_weights @ f_total, mp.dt_s * f_total.sum(axis=0)
             target, target_v = target + shift_p, target_v + shift_v
         return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), target_v
 
