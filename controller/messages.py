@@ -31,8 +31,11 @@ def frozen_array(value, shape: tuple[int, ...], name: str) -> np.ndarray:
         arr = value
     else:
         arr = np.array(value, dtype=float)
-    if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape, strict=True)):
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    got = arr.shape
+    if got != shape and (
+        len(got) != len(shape) or any(s not in (-1, a) for s, a in zip(shape, got, strict=True))
+    ):
+        raise ValueError(f"{name} must have shape {shape}, got {got}")
     if arr is not value:
         arr.setflags(write=False)
     return arr

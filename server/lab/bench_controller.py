@@ -209,7 +209,8 @@ def _compare_with_cvxpy(instances: list[dict]) -> None:
     cvx_cpu = float(np.median([r[2] for r in cvx]))
     print(f"MPC solve vs CVXPY, the same {len(instances)} QPs (K = 16 flight at 100 Hz, in sequence):")
     print(
-        f"  CVXPY + OSQP (defaults)             median {1e3 * cvx_median:8.4f} ms  (CPU {1e3 * cvx_cpu:.4f} ms)"
+        f"  CVXPY + OSQP (defaults)             median {1e3 * cvx_median:8.4f} ms  "
+        f"(CPU {1e3 * cvx_cpu:.4f} ms)"
     )
     for solver, label in (("exact", "ours, exact (closed form / DAQP)"), ("osqp", "ours, OSQP (built once)")):
         elapsed, cpu, first = timed[solver]
