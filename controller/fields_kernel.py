@@ -413,9 +413,11 @@ def external_inputs_compiled(
     """fields.external_inputs, compiled: same arguments, same result (to round-off)."""
     own = np.ascontiguousarray(own_positions_m, dtype=float)
     steps = own.shape[0]
-    person_xy = np.ascontiguousarray(
-        np.broadcast_to(np.asarray(person_position_m, dtype=float)[..., :2], (steps, 2))
-    )
+    person = np.asarray(person_position_m, dtype=float)
+    if person.shape == (steps, 3):
+        person_xy = person[:, :2].copy()
+    else:
+        person_xy = np.ascontiguousarray(np.broadcast_to(person[..., :2], (steps, 2)))
     has_vel = own_velocities_mps is not None
     own_vel = np.ascontiguousarray(own_velocities_mps, dtype=float) if has_vel else own
     out = np.zeros((6, steps, 3))

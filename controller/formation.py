@@ -94,8 +94,8 @@ def _finite(*arrays) -> bool:
 
 
 def _sane(*arrays) -> bool:
-    """Finite and within SANE_ABS (a NaN fails the comparison)."""
-    return all(float(np.abs(a).max()) < SANE_ABS for a in arrays)
+    """Finite and within SANE_ABS (a NaN fails the comparison). On plain floats: these are (3,) vectors."""
+    return all(abs(v) < SANE_ABS for a in arrays for v in np.asarray(a).ravel().tolist())
 
 
 class FormationController:
