@@ -63,9 +63,11 @@ def describe_log(flight_log: FlightLog) -> str:
 def build_station(*, vehicles: int, seed: int, method: Method, trees: str, person: str, rate_hz: float):
     """A ground station over the embedded simulation: `vehicles` simulated MAVs, the paper's (or no, or N
     random) trees and the walking (random, still) person, ticking at rate_hz."""
+    from controller.warmup import warm_up
     from server.station.ground_station import GroundStation, camera_view
     from vehicles.sim.scenario import Scenario, build_sim
 
+    warm_up()  # the compiled kernels, before the first tick (compiles once on a fresh install)
     setup = build_sim(
         Scenario(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person),
         clock=time.perf_counter,
@@ -288,6 +290,9 @@ def run_px4(
             ),
         )
     )
+    from controller.warmup import warm_up
+
+    warm_up()  # the compiled kernels, before the first tick (compiles once on a fresh install)
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
     try:
         stats = asyncio.run(
