@@ -13,14 +13,16 @@ import numpy as np
 
 from controller.formation import FormationController
 from controller.messages import Detection, HorizonPlan, Obstacle, PersonEstimate, VehicleState
+from controller.mpc import ModelPredictiveController
 from controller.params import ControllerParams, FormationParams
 from controller.teammates import TeammateTable
 from controller.tracker import PersonTracker
 
 
 def warm_up(params: ControllerParams | None = None) -> None:
-    """One tracker update and estimate, and one formation-controller step with a teammate's plan from the
-    plan table and an obstacle within reach, so every kernel on the tick's path has run once."""
+    """One tracker update and estimate, formation-controller steps with a teammate's plan from the plan table
+    and an obstacle within reach, and an MPC solve with an active bound (the active-set path), so every
+    kernel on the tick's path has run once."""
     params = params or ControllerParams()
     tracker = PersonTracker(params.tracker)
     tracker.update(Detection(source_id=2, stamp_s=0.0, position_m=np.zeros(3), cov_m2=np.eye(3)))
@@ -52,3 +54,11 @@ def warm_up(params: ControllerParams | None = None) -> None:
             obstacles=(trunk,),
             formation=FormationParams(),
         )
+    constrained = ModelPredictiveController(params.mpc)
+    constrained.solve(
+        position_m=np.array([0.0, 0.0, 6.0]),
+        velocity_mps=np.zeros(3),
+        target_position_m=np.array([60.0, 0.0, 6.0]),
+        target_velocity_mps=np.zeros(3),
+        external_inputs_mps2=np.zeros((steps - 1, 3)),
+    )

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from controller import fields_kernel, mpc_kernels, qp, teammates, tracker
+from controller import fields_kernel, mpc_kernels, teammates, tracker
 from controller.warmup import warm_up
 
 
@@ -11,7 +11,7 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
     kernels = (
         fields_kernel._kernel,
         mpc_kernels.solve_fast,
-        qp.closed_form_kernel,
+        mpc_kernels.rollout,
         teammates.align_rows,
         tracker._predicted,
     )
