@@ -42,7 +42,9 @@ def run(*, repeats: int) -> None:
             replan_hz=replan_hz,
         )
         marks: list[tuple[float, float]] = []  # (simulated s, CPU s) at each progress call after warm-up
-        m = run_simulation(config, progress=lambda t: marks.append((t, time.process_time()))).metrics
+        m = run_simulation(
+            config, progress=lambda t, marks=marks: marks.append((t, time.process_time()))
+        ).metrics
         end_cpu = time.process_time()
         rtf, tick = m["realtime_factor"], m["tick_ms"]
         cpu_rtf = (config.duration_s - marks[0][0]) / (end_cpu - marks[0][1]) if marks else float("nan")
