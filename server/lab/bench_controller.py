@@ -193,6 +193,7 @@ def _compare_with_cvxpy(instances: list[dict]) -> None:
         print("  CVXPY is not installed (a test extra): comparison skipped")
         return
     timed: dict[str, tuple[list[float], list[float], list[np.ndarray]]] = {}
+    paths: list[str] = []
     for solver in ("exact", "osqp"):
         ours = ModelPredictiveController(MpcParams(solver=solver))
         elapsed, cpu, first = [], [], []
@@ -203,6 +204,8 @@ def _compare_with_cvxpy(instances: list[dict]) -> None:
             cpu.append(time.thread_time() - c0)
             first.append(sol.inputs_mps2[0])
         timed[solver] = (elapsed, cpu, first)
+        if solver == "exact":
+            paths = [ours.solve(**case).path for case in instances]
     cvx = [solve_cvx(case, "OSQP", tight=False) for case in instances]
     cvx_tight = [solve_cvx(case, "OSQP", tight=True) for case in instances]
     cvx_median = float(np.median([r[0] for r in cvx]))
@@ -226,6 +229,8 @@ def _compare_with_cvxpy(instances: list[dict]) -> None:
         )
     loose = max(float(np.abs(f - r[1][0]).max()) for f, r in zip(timed["exact"][1], cvx, strict=True))
     print(f"  (against CVXPY + OSQP at its default tolerances: max |du(0)| = {loose:.1e} m/s^2)")
+    counts = ", ".join(f"{p} {paths.count(p)}" for p in ("closed_form", "blocks", "active_set"))
+    print(f"  exact solver's path on these QPs: {counts} (of {len(paths)})")
 
 
 def run(*, repeats: int) -> None:
