@@ -167,13 +167,14 @@ class TeammateTable:
         length = positions.shape[0]
         if length > self._positions.shape[1]:
             self._allocate(self._positions.shape[0], length)
+        if old is None or old.position_cov_m2 is not cov:  # the sender's covariance rarely changes
+            self._radii[row] = covariance_radius_m(cov)
         self._plans[vid] = plan
         self._row_ids[row] = vid
         self._positions[row, :length] = positions
         self._lengths[row] = length
         self._stamps[row] = plan.stamp_s
         self._dts[row] = plan.dt_s
-        self._radii[row] = covariance_radius_m(cov)
         self._in_formation[row] = plan.in_formation
         return "stored"
 
