@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: run test bench lint chromium clean
+.PHONY: run test bench lint chromium clean kernels
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,7 +19,12 @@ chromium:
 run: $(STAMP)
 	$(VENV)/bin/skyring serve
 
-test: $(STAMP) chromium
+# The controller's numba kernels are compiled (first run after an install) or loaded once before the tests,
+# so that no timed test pays for the compile (docs/fast-core.md).
+kernels: $(STAMP)
+	$(PY) -c "from controller.warmup import warm_up; warm_up()"
+
+test: $(STAMP) chromium kernels
 	$(PY) -m pytest -q -ra -n auto --durations=15
 
 bench: $(STAMP)
