@@ -29,8 +29,30 @@ PLOT_WINDOW_S = 120.0  # seconds of history the plots show
 STALE_FLAG = "STALE"
 
 
+AGENT_LOST_FLAG = "AGENT LOST"
+SKEW_FLAG = "CLOCK SKEW"
+
+
+def agent_line(vehicle: VehicleView) -> str:
+    """The card's line about a networked agent: lost, clock skew, the latest command's outcome per vehicle."""
+    a = vehicle.agent
+    if a is None:
+        return ""
+    parts = [f"**{AGENT_LOST_FLAG}** ({a.age_s:.1f} s)" if a.lost else "agent ok"]
+    if a.station_lost:
+        parts.append("it lost the station")
+    if a.clock_offset_s is not None:
+        skew = f" **{SKEW_FLAG}**" if a.clock_skew else ""
+        parts.append(f"clock {a.clock_offset_s * 1e3:+.0f} ms{skew}")
+    if a.commands:
+        command_id, action, outcome, message = a.commands[-1]
+        parts.append(f"cmd {command_id} {action}: {outcome}" + (f" ({message})" if message else ""))
+    return " · ".join(parts)
+
+
 def vehicle_card(vehicle: VehicleView) -> str:
-    """Markdown for one vehicle's card: phase, mode, armed, link age (flagged when stale), solver, battery."""
+    """Markdown for one vehicle's card: phase, mode, armed, link age (flagged when stale), solver, battery,
+    and for an onboard agent its link, clock and last command."""
     link = f"{vehicle.link_age_s:.1f} s" + (f" **{STALE_FLAG}**" if vehicle.link_stale else "")
     solver = "-" if vehicle.solver_time_s is None else f"{vehicle.solver_time_s * 1e3:.2f} ms"
     battery = "unknown" if vehicle.battery_fraction is None else f"{vehicle.battery_fraction * 100:.0f} %"
@@ -40,6 +62,7 @@ def vehicle_card(vehicle: VehicleView) -> str:
         f"mode {vehicle.mode}, {'armed' if vehicle.armed else 'disarmed'}, "
         f"{'in air' if vehicle.in_air else 'on ground'}  \n"
         f"link {link} · solver {solver}{status} · battery {battery}"
+        + (f"  \n{agent_line(vehicle)}" if vehicle.agent is not None else "")
     )
 
 

@@ -16,6 +16,27 @@ from controller.messages import Obstacle, PersonEstimate, frozen_array
 from controller.params import FormationParams
 
 
+@dataclass(frozen=True)
+class AgentView:
+    """How the station hears a vehicle's onboard agent over the network (None for in-process agents).
+
+    lost: nothing heard for longer than the station's limit; age_s: since its last state; clock_offset_s:
+    agent clock minus station clock (None before a measurement); clock_skew: beyond the station's limit
+    (50 ms); tick_period_p99_error_s: the agent's control-tick jitter; station_lost: the agent no longer hears
+    the station; rejected_messages: network messages it refused; commands: recent operator commands as
+    (command id, action, outcome "pending"/"acked"/"refused"/"failed", message), newest last.
+    """
+
+    lost: bool
+    age_s: float
+    clock_offset_s: float | None = None
+    clock_skew: bool = False
+    tick_period_p99_error_s: float | None = None
+    station_lost: bool = False
+    rejected_messages: int = 0
+    commands: tuple[tuple[int, str, str, str], ...] = ()
+
+
 @dataclass(frozen=True, eq=False)
 class VehicleView:
     """One MAV as the operator sees it.
@@ -24,7 +45,8 @@ class VehicleView:
     horizon plan (M = 0 when none); phase: the mission's phase name (e.g. "formation", "landing", "landed");
     mode: the autopilot flight mode name; link_age_s: seconds since its last telemetry (stale when
     `link_stale`); solver_time_s: the MPC solver's own time of the last solve (0 when the closed form solved
-    it; None before the first); battery_fraction in [0, 1] or None when unknown.
+    it; None before the first); battery_fraction in [0, 1] or None when unknown; agent: its onboard agent's
+    link (None when the agent runs in the station).
     """
 
     vehicle_id: int
@@ -41,6 +63,7 @@ class VehicleView:
     solver_time_s: float | None = None
     battery_fraction: float | None = None
     plan_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    agent: AgentView | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position_m", frozen_array(self.position_m, (3,), "position_m"))

@@ -16,6 +16,7 @@ import logging
 import math
 import threading
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,7 +33,10 @@ from server.station.commands import (
 )
 from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
-from webui.view import CameraView, Range, SceneView, VehicleView
+from webui.view import AgentView, CameraView, Range, SceneView, VehicleView
+
+if TYPE_CHECKING:
+    from server.station.fleet import AgentFleet
 
 FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)
 
@@ -88,7 +92,7 @@ class GroundStation:
     def __init__(
         self,
         *,
-        mission: Mission,
+        mission: Mission | AgentFleet,
         control_period_s: float,
         limits: CommandLimits | None = None,
         start_s: float = 0.0,
@@ -130,7 +134,8 @@ class GroundStation:
         return self._limits
 
     @property
-    def mission(self) -> Mission:
+    def mission(self) -> Mission | AgentFleet:
+        """The in-process mission, or the fleet of onboard agents the station supervises."""
         return self._mission
 
     @property
@@ -410,11 +415,30 @@ def vehicle_view(v: VehicleSnapshot, *, link_stale_s: float) -> VehicleView:
         position_m=s.position_m if s is not None else np.zeros(3),
         yaw_rad=s.yaw_rad if s is not None else 0.0,
         link_age_s=age,
-        link_stale=age > link_stale_s or (s is not None and s.link_lost),
+        link_stale=age > link_stale_s
+        or (s is not None and s.link_lost)
+        or (v.agent is not None and v.agent.lost),
         solve_status=v.status.value if v.status is not None else "",
         solver_time_s=v.solver_time_s if v.status is not None else None,
         battery_fraction=s.battery_fraction if s is not None else None,
         plan_positions_m=plan,
+        agent=agent_view(v.agent) if v.agent is not None else None,
+    )
+
+
+def agent_view(link, *, skew_limit_s: float = 0.05) -> AgentView:
+    """A networked agent's link (vehicles.pilot.AgentLink) as the operator sees it; skew flagged beyond
+    skew_limit_s."""
+    offset = link.clock_offset_s
+    return AgentView(
+        lost=link.lost,
+        age_s=link.age_s if math.isfinite(link.age_s) else 1e9,
+        clock_offset_s=offset,
+        clock_skew=offset is not None and abs(offset) > skew_limit_s,
+        tick_period_p99_error_s=link.tick_period_p99_error_s,
+        station_lost=link.station_lost,
+        rejected_messages=link.rejected_messages,
+        commands=link.commands,
     )
 
 

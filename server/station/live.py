@@ -1,10 +1,13 @@
 """Running the ground station live: pacing control ticks against the wall clock, and serving the API and the
-operator page beside them in one asyncio loop.
+operator page beside them.
 
-`LiveRunner` advances the station `speed` simulated seconds per wall second in batches short enough that the
-API and the WebSocket stay responsive; when the CPU cannot keep up it re-anchors instead of spiralling and
-counts it. `serve_station` runs viser, uvicorn and the runner until stopped (SIGINT/SIGTERM or an event),
-then lands every MAV and closes the back-ends in a `finally`, whatever stopped it.
+`LiveRunner` advances the station `speed` simulated seconds per wall second in short batches; when the CPU
+cannot keep up it re-anchors instead of spiralling and counts it. `serve_station` runs it on a thread of its
+own with its own event loop and clock (`ControlThread`), so neither request bodies nor WebSocket clients on
+the web's event loop can delay a control tick; viser, uvicorn and the frame publisher share the web's loop.
+It serves until stopped (SIGINT/SIGTERM or an event), then lands every MAV and closes the back-ends in a
+`finally`, whatever stopped it. (With `--agents zenoh|spawn` the control loops are in the agents' own
+processes and the station's tick only gathers their state.)
 """
 
 from __future__ import annotations
@@ -125,6 +128,57 @@ class LiveRunner:
             log.exception("publishing a frame failed")
 
 
+class ControlThread:
+    """A `LiveRunner` on its own thread, with its own asyncio loop and the monotonic clock."""
+
+    def __init__(self, runner: LiveRunner) -> None:
+        self.runner = runner
+        self.error: BaseException | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._started = threading.Event()
+        self._thread = threading.Thread(target=self._main, name="control-loop", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+        self._started.wait(5.0)
+
+    def is_alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        if self._loop is not None and self._stop is not None and self._thread.is_alive():
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(timeout_s)
+
+    def _main(self) -> None:
+        async def main() -> None:
+            self._loop = asyncio.get_running_loop()
+            self._stop = asyncio.Event()
+            self._started.set()
+            await self.runner.run(self._stop)
+
+        try:
+            asyncio.run(main())
+        except BaseException as exc:  # noqa: BLE001 - reported to serve_station
+            self.error = exc
+        finally:
+            self._started.set()
+
+
+async def _publish_frames(
+    publish: Callable[[], None], period_s: float, stop: asyncio.Event, control: ControlThread
+) -> None:
+    """Draw the operator's view every period_s on the web's loop until stop (or the control loop ended)."""
+    while not stop.is_set() and control.is_alive():
+        try:
+            publish()
+        except Exception:  # noqa: BLE001 - a drawing problem must not stop the MAVs' control
+            log.exception("publishing a frame failed")
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), timeout=period_s)
+
+
 def bind_port(host: str, port: int) -> tuple[socket.socket, bool]:
     """A listening TCP socket on (host, port), or on a free port if that one is taken. Returns (socket,
     fell_back)."""
@@ -222,18 +276,20 @@ async def serve_station(
         )
         if on_ready is not None:
             on_ready(urls, ui)
-        runner = LiveRunner(
-            station=station,
-            speed=speed,
-            frame_period_s=frame_period_s,
-            on_frame=lambda: ui.publish(station.scene_view()),
+        runner = LiveRunner(station=station, speed=speed)
+        control = ControlThread(runner)
+        control.start()
+        frames_task = asyncio.create_task(
+            _publish_frames(lambda: ui.publish(station.scene_view()), frame_period_s, stop, control)
         )
-        runner_task = asyncio.create_task(runner.run(stop))
         stop_task = asyncio.create_task(stop.wait())
-        await asyncio.wait({runner_task, serve_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)
+        await asyncio.wait({frames_task, serve_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)
         stop.set()
-        await runner_task
+        await asyncio.to_thread(control.stop)
+        await frames_task
         stop_task.cancel()
+        if control.error is not None:
+            raise control.error
         if serve_task.done() and not serve_task.cancelled() and serve_task.exception() is not None:
             raise serve_task.exception()
         return runner.stats
