@@ -43,7 +43,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from controller.mpc_kernels import CLOSED_FORM, INVALID, rollout, solve_fast
+from controller.mpc_kernels import CLOSED_FORM, INVALID, NEEDS_SOLVER, rollout, solve_fast
 from controller.qp import ExactQp
 
 EFFORT_MODES = ("hover", "planned", "raw")
@@ -74,6 +74,9 @@ class MpcParams:
     admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
     solution, non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
+    half_plane_weight, half_plane_quadratic_weight: the exact (L-infinity) penalty per m of the largest
+    violation of the soft half-planes a solve may be given (`HalfPlanes`), and its quadratic companion; far
+    above slack_weight, so a half-plane gives way only when it cannot hold.
     """
 
     horizon_steps: int = 15
@@ -98,6 +101,8 @@ class MpcParams:
     polishing: bool = True
     accept_inaccurate: bool = True
     violation_tolerance: float = 1.0e-4
+    half_plane_weight: float = 1.0e5
+    half_plane_quadratic_weight: float = 1.0e3
 
     def __post_init__(self) -> None:
         if self.horizon_steps < 1:
@@ -125,11 +130,30 @@ class MpcParams:
                 raise ValueError(f"{name} must be a finite number >= 0, got {getattr(self, name)}")
         if not (np.isfinite(self.slack_weight) and self.slack_weight > 0):
             raise ValueError(f"slack_weight must be positive, got {self.slack_weight}")
+        if not (np.isfinite(self.half_plane_weight) and self.half_plane_weight > 0):
+            raise ValueError(f"half_plane_weight must be positive, got {self.half_plane_weight}")
+        if not (np.isfinite(self.half_plane_quadratic_weight) and self.half_plane_quadratic_weight > 0):
+            raise ValueError(
+                f"half_plane_quadratic_weight must be > 0, got {self.half_plane_quadratic_weight}"
+            )
 
     @property
     def gravity_vector_mps2(self) -> np.ndarray:
         """(3,) g = (0, 0, -gravity) in ENU."""
         return np.array([0.0, 0.0, -self.gravity_mps2])
+
+
+@dataclass(frozen=True, eq=False)
+class HalfPlanes:
+    """Soft linear constraints on the plan's horizontal positions, one per row r:
+    normals_xy[r] . x(steps[r])[:2] >= offsets[r], with steps (R,) int in 1..N+1, normals_xy (R, 2), offsets
+    (R,) m. A generic hook for constraints built outside the MPC (e.g. separation half-planes); they enter
+    the QP as extra rows on the condensed inputs, softened by one shared slack with an exact penalty
+    (MpcParams.half_plane_weight), so the QP never becomes infeasible because of them. Exact solver only."""
+
+    steps: np.ndarray
+    normals_xy: np.ndarray
+    offsets: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,6 +170,7 @@ class MpcSolution:
     iterations: int  # solver iterations (0: the exact solver's closed form)
     solve_time_s: float  # the solver's own reported run time (OSQP: update, iterations, polish; exact: DAQP's
     # time, 0 for the closed form, which takes microseconds and is not timed: the controller reads no clock)
+    half_plane_violation_m: float = 0.0  # largest violation of the given half-planes by the plan (m)
     path: str = "osqp"  # which solver produced it: "osqp", or the exact solver's "closed_form", "blocks",
     # "active_set" (controller/qp.py)
 
@@ -267,8 +292,15 @@ class ModelPredictiveController:
         self._p_rows, self._p_cols, self._p_indptr = self._p_pattern()
         self._shifts = [self._shift_permutations(k) for k in range(m)]
         self._exact = params.solver == "exact"
-        self._a_dense = self._a_matrix.toarray()
-        self._resting = np.arange(self._n_var) >= self._nu
+        # The exact solver's QP has one more variable: the half-planes' shared slack w (last), with w >= 0.
+        self._n_exact = self._n_var + 1
+        a_dense = self._a_matrix.toarray()
+        self._a_exact = np.zeros((a_dense.shape[0] + 1, self._n_exact))
+        self._a_exact[:-1, :-1] = a_dense
+        self._a_exact[-1, -1] = 1.0
+        self._l_exact = np.append(self._l_template, 0.0)
+        self._u_exact = np.append(self._u_template, np.inf)
+        self._resting = np.arange(self._n_exact) >= self._nu
         self._state_min_c = np.ascontiguousarray(self._state_min)
         self._state_max_c = np.ascontiguousarray(self._state_max)
         self._effort_code = EFFORT_MODES.index(params.effort)
@@ -379,10 +411,11 @@ class ModelPredictiveController:
 
     def _exact_qp(self, w_terminal: np.ndarray) -> ExactQp:
         """The exact solver for this terminal weight (P's upper triangle from `_p_data`, mirrored)."""
-        p = np.zeros((self._n_var, self._n_var))
+        p = np.zeros((self._n_exact, self._n_exact))
         p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
         p = p + np.triu(p, 1).T
-        return ExactQp(p, self._a_dense, self._resting, iteration_limit=self._params.max_iterations)
+        p[-1, -1] = 2.0 * self._params.half_plane_quadratic_weight
+        return ExactQp(p, self._a_exact, self._resting, iteration_limit=self._params.max_iterations)
 
     def _setup_solver(self) -> None:
         prm = self._params
@@ -439,6 +472,46 @@ class ModelPredictiveController:
         hi[self._upper_rows] -= free
         return q, lo, hi
 
+    def _checked_half_planes(
+        self, half_planes: HalfPlanes | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(steps (R,) int, normals (R, 2), offsets (R,)) of the given half-planes, None when there are none;
+        ValueError for wrong shapes or steps, or for half-planes with the OSQP solver."""
+        if half_planes is None or len(half_planes.steps) == 0:
+            return None
+        if not self._exact:
+            raise ValueError('half-planes need the exact solver (MpcParams(solver="exact"))')
+        steps = np.asarray(half_planes.steps)
+        count = steps.shape[0]
+        normals = np.asarray(half_planes.normals_xy, dtype=float)
+        offsets = np.asarray(half_planes.offsets, dtype=float)
+        if steps.ndim != 1 or normals.shape != (count, 2) or offsets.shape != (count,):
+            raise ValueError(f"half-planes: steps (R,), normals_xy (R, 2), offsets (R,); got {count} steps")
+        if not np.issubdtype(steps.dtype, np.integer) or steps.min() < 1 or steps.max() > self._n_steps:
+            raise ValueError(f"half-plane steps must be integers in 1..{self._n_steps}")
+        return steps.astype(np.int64), normals, offsets
+
+    def _half_plane_rows(
+        self,
+        planes: tuple[np.ndarray, np.ndarray, np.ndarray],
+        position: np.ndarray,
+        velocity: np.ndarray,
+        f: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The half-planes as extra rows of the exact QP: a^T G_xy(n) u + w >= b - a^T h_xy(n) (h the free
+        response), w the shared slack (last variable). Returns (rows (R, n), lower (R,), upper (R,))."""
+        steps, normals, offsets = planes
+        x0 = np.concatenate([position, velocity])
+        free = self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
+        first = 6 * (steps - 1)  # the x row of step n in the stacked states; y is the next one
+        rows = np.zeros((len(steps), self._n_exact))
+        rows[:, : self._nu] = (
+            normals[:, :1] * self._input_to_state[first] + normals[:, 1:] * self._input_to_state[first + 1]
+        )
+        rows[:, -1] = 1.0
+        lower = offsets - (normals[:, 0] * free[first] + normals[:, 1] * free[first + 1])
+        return rows, lower, np.full(len(steps), np.inf)
+
     def _solve_exact(
         self,
         *,
@@ -447,16 +520,17 @@ class ModelPredictiveController:
         target_position_m: np.ndarray,
         target_velocity_mps: np.ndarray,
         external_inputs_mps2: np.ndarray,
+        half_planes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> MpcSolution | None:
         """The solve with ExactQp: arithmetic in compiled kernels (mpc_kernels.py); the closed form in one
         call. None when a number is not finite or implausible (the caller says which)."""
         prm = self._params
         n = self._n_steps
-        q = np.empty(self._n_var)
-        lo = np.empty(self._l_template.shape[0])
-        hi = np.empty(self._l_template.shape[0])
+        q = np.empty(self._n_exact)
+        lo = np.empty(self._l_exact.shape[0])
+        hi = np.empty(self._l_exact.shape[0])
         qp = self._qp
-        z = np.empty(self._n_var)
+        z = np.empty(self._n_exact)
         rows = np.empty(qp.row_count)
         gradient = np.empty(qp.resting_count)
         inputs = np.empty((n, 3))
@@ -467,8 +541,8 @@ class ModelPredictiveController:
             self._free_x0,
             self._input_to_state,
             self._q_terminal,
-            self._l_template,
-            self._u_template,
+            self._l_exact,
+            self._u_exact,
             position_m,
             velocity_mps,
             target_position_m,
@@ -497,9 +571,18 @@ class ModelPredictiveController:
         )
         if verdict == INVALID:
             return None
+        q[-1] = prm.half_plane_weight  # the kernel set every slack's weight to slack_weight
+        extra: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[None, None, None] = (None, None, None)
+        fixed_rows_ok = False  # whether the closed form satisfied every fixed row (then only extras failed)
+        if half_planes is not None:
+            if not (np.all(np.isfinite(half_planes[1])) and np.all(np.isfinite(half_planes[2]))):
+                return None
+            extra = self._half_plane_rows(half_planes, position_m, velocity_mps, f)
+            if verdict == CLOSED_FORM and (extra[0] @ z < extra[1] - 1e-9).any():
+                verdict, fixed_rows_ok = NEEDS_SOLVER, True
         path, iterations, time_s = "closed_form", 0, 0.0
         if verdict != CLOSED_FORM:
-            result = qp.finish(q, lo, hi, False, z, rows, gradient)
+            result = qp.finish(q, lo, hi, fixed_rows_ok, z, rows, gradient, *extra)
             if not result.ok:
                 message = f"exact QP: {result.status} ({result.message})"
                 return self._failure(result.status, message, result.iterations, result.solve_time_s)
@@ -521,6 +604,11 @@ class ModelPredictiveController:
             )
         if not np.isfinite(violation):
             return self._failure("non_finite_plan", "the plan is not finite", iterations)
+        plane_violation = 0.0
+        if half_planes is not None:
+            steps, normals, offsets = half_planes
+            shortfall = offsets - np.einsum("ri,ri->r", normals, positions[steps, :2])
+            plane_violation = max(0.0, float(shortfall.max()))
         for arr in (inputs, positions, velocities):
             arr.setflags(write=False)  # handed on (e.g. into a HorizonPlan) without a copy
         return MpcSolution(
@@ -533,6 +621,7 @@ class ModelPredictiveController:
             max_state_violation=violation if violation > prm.violation_tolerance else 0.0,
             iterations=iterations,
             solve_time_s=time_s,
+            half_plane_violation_m=plane_violation if plane_violation > prm.violation_tolerance else 0.0,
             path=path,
         )
 
@@ -560,9 +649,13 @@ class ModelPredictiveController:
         external_inputs_mps2: np.ndarray,
         terminal_position_weight: np.ndarray | None = None,
         terminal_velocity_weight: np.ndarray | None = None,
+        half_planes: HalfPlanes | None = None,
     ) -> MpcSolution:
         """Plan u(0..N) from x(0) = (position_m, velocity_mps), (3,) each, to the terminal reference
         (target_position_m, target_velocity_mps), (3,) each, under the external inputs f(0..N), (N+1, 3).
+
+        half_planes: soft constraints on the plan's horizontal positions (`HalfPlanes`; exact solver only:
+        with OSQP they raise ValueError). Steps outside 1..N+1 or wrong shapes raise ValueError.
 
         terminal_*_weight: (3, 3) symmetric PSD W_p / W_v for this solve; None = the params' scalar * I3.
         Wrong shapes raise ValueError (a programming error). Non-finite or implausibly large numbers, or an
@@ -583,15 +676,22 @@ class ModelPredictiveController:
             if arr.shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
             arrays[name] = arr
+        planes = self._checked_half_planes(half_planes)
         default_weights = terminal_position_weight is None and terminal_velocity_weight is None
         if self._exact and default_weights and self._w_terminal is self._default_w_terminal:
-            solution = self._solve_exact(**arrays)  # checks the numbers itself, in the compiled kernel
+            solution = self._solve_exact(**arrays, half_planes=planes)  # checks its numbers in the kernel
             if solution is not None:
                 return solution
         reasons = []
         values = np.concatenate([arr.ravel() for arr in arrays.values()])
         if not np.all(np.abs(values) <= PLAUSIBLE_MAGNITUDE):  # also False for NaN
             reasons = [why for name, arr in arrays.items() if (why := _magnitude_problem(arr, name))]
+        if planes is not None:
+            reasons += [
+                why
+                for name, arr in (("half-plane normals", planes[1]), ("half-plane offsets", planes[2]))
+                if (why := _magnitude_problem(arr, name))
+            ]
         wp, why_p = _checked_weight(
             terminal_position_weight, prm.terminal_position_weight, "terminal_position_weight"
         )
@@ -617,7 +717,7 @@ class ModelPredictiveController:
         elif default_weights:
             self._w_terminal = self._default_w_terminal
         if self._exact:
-            solution = self._solve_exact(**arrays)
+            solution = self._solve_exact(**arrays, half_planes=planes)
             assert solution is not None  # the numbers were checked above
             return solution
         x0 = np.concatenate([arrays["position_m"], arrays["velocity_mps"]])

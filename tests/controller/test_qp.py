@@ -11,7 +11,7 @@ import pytest
 import scipy.sparse as sp
 from test_mpc import KINDS, random_case
 
-from controller.mpc import ModelPredictiveController, MpcParams
+from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
 from controller.qp import ExactQp
 
 TOL = 1e-6
@@ -172,7 +172,9 @@ def test_indefinite_hessian_is_refused():
 MPC_CASES = 200
 
 
-def cvxpy_mpc_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def cvxpy_mpc_reference(
+    params: MpcParams, case: dict, planes: HalfPlanes | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The MPC's QP from the equations (states as variables, as in test_mpc.py) through CVXPY + OSQP at tight
     tolerances with polishing. (Clarabel, an interior-point method, stops 1e-5..4e-4 away from the vertex
     on these degenerate instances, inputs at their bounds, whatever its tolerances.)"""
@@ -204,6 +206,12 @@ def cvxpy_mpc_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.n
         + params.slack_weight * cp.sum(s)
         + params.slack_quadratic_weight * cp.sum_squares(s)
     )
+    if planes is not None:  # the soft half-planes with their shared slack w
+        w = cp.Variable()
+        constraints += [w >= 0]
+        for n, a, b in zip(planes.steps, planes.normals_xy, planes.offsets, strict=True):
+            constraints.append(a @ p[int(n), :2] + w >= b)
+        cost = cost + params.half_plane_weight * w + params.half_plane_quadratic_weight * cp.square(w)
     problem = cp.Problem(cp.Minimize(cost), constraints)
     problem.solve(
         solver=cp.OSQP,
@@ -287,3 +295,96 @@ def test_mpc_instances_are_mostly_constrained(mpc_results):
 def test_mpc_exact_reports_the_same_violation_as_osqp(mpc_results):
     for ours, ref, _ in mpc_results:
         assert ours.max_state_violation == pytest.approx(ref.max_state_violation, abs=1e-6)
+
+
+# ---------------------------------------------------------------------------------- soft half-planes (hook)
+def _with_weights(case: dict) -> dict:
+    return {
+        **case,
+        "terminal_position_weight": 100.0 * np.eye(3),
+        "terminal_velocity_weight": 100.0 * np.eye(3),
+    }
+
+
+def _cut(rng: np.random.Generator, plan_positions: np.ndarray, count: int, depth_m: float) -> HalfPlanes:
+    """count half-planes that the given plan violates by depth_m at random steps from 8 on (late enough for
+    the input authority to meet them) and random directions."""
+    steps = rng.integers(8, len(plan_positions), count)
+    angles = rng.uniform(0.0, 2.0 * np.pi, count)
+    normals = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    offsets = np.einsum("ri,ri->r", normals, plan_positions[steps, :2]) + depth_m
+    return HalfPlanes(steps=steps, normals_xy=normals, offsets=offsets)
+
+
+@pytest.fixture(scope="module")
+def half_plane_results():
+    """30 flight-like instances, each with 1-4 half-planes its free plan violates by 0.05-0.3 m, solved in
+    sequence by one exact controller, and by CVXPY + OSQP with the same soft constraints."""
+    rng = np.random.default_rng(515)
+    controller = ModelPredictiveController(MpcParams())
+    out = []
+    for _ in range(30):
+        case = flight_case(rng)
+        free = controller.solve(**case)
+        planes = _cut(rng, free.positions_m, int(rng.integers(1, 5)), float(rng.uniform(0.05, 0.3)))
+        out.append(
+            (
+                controller.solve(**case, half_planes=planes),
+                cvxpy_mpc_reference(MpcParams(), _with_weights(case), planes),
+                planes,
+            )
+        )
+    return out
+
+
+def test_half_planes_match_cvxpy(half_plane_results):
+    assert all(ours.ok for ours, _, _ in half_plane_results)
+    assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, cvx, _ in half_plane_results) < TOL
+
+
+def test_half_planes_that_can_hold_are_held(half_plane_results):
+    """A single late cut of at most 0.3 m into a free plan can be met within the input box: no violation is
+    left. (Several cuts in different directions at nearby steps may contradict each other; those are only
+    compared with CVXPY.) Every solve needed the active-set solver: the closed form violated the cuts."""
+    single = [ours for ours, _, planes in half_plane_results if len(planes.steps) == 1]
+    assert len(single) >= 5
+    assert all(ours.half_plane_violation_m == 0.0 for ours in single)
+    assert all(ours.path == "active_set" for ours, _, _ in half_plane_results)
+
+
+def test_contradictory_half_planes_give_way_without_failing():
+    case = flight_case(np.random.default_rng(3))
+    controller = ModelPredictiveController(MpcParams())
+    x = controller.solve(**case).positions_m[5, 0]
+    planes = HalfPlanes(  # x >= x5 + 1 and x <= x5 - 1 at step 5: 2 m apart, cannot both hold
+        steps=np.array([5, 5]),
+        normals_xy=np.array([[1.0, 0.0], [-1.0, 0.0]]),
+        offsets=np.array([x + 1.0, -x + 1.0]),
+    )
+    sol = controller.solve(**case, half_planes=planes)
+    assert sol.ok and sol.half_plane_violation_m == pytest.approx(1.0, abs=1e-3)
+
+
+def test_no_half_planes_leave_the_solution_unchanged():
+    case = flight_case(np.random.default_rng(4))
+    controller = ModelPredictiveController(MpcParams())
+    empty = HalfPlanes(steps=np.zeros(0, dtype=int), normals_xy=np.zeros((0, 2)), offsets=np.zeros(0))
+    np.testing.assert_array_equal(
+        controller.solve(**case).inputs_mps2, controller.solve(**case, half_planes=empty).inputs_mps2
+    )
+
+
+def test_half_planes_need_the_exact_solver():
+    planes = HalfPlanes(steps=np.array([3]), normals_xy=np.array([[1.0, 0.0]]), offsets=np.array([0.0]))
+    with pytest.raises(ValueError, match="exact solver"):
+        ModelPredictiveController(MpcParams(solver="osqp")).solve(
+            **flight_case(np.random.default_rng(5)), half_planes=planes
+        )
+
+
+def test_half_plane_step_outside_the_horizon_raises():
+    planes = HalfPlanes(steps=np.array([0]), normals_xy=np.array([[1.0, 0.0]]), offsets=np.array([0.0]))
+    with pytest.raises(ValueError, match="steps"):
+        ModelPredictiveController(MpcParams()).solve(
+            **flight_case(np.random.default_rng(6)), half_planes=planes
+        )
