@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "experiment": "server.cli.experiment:experiment",
     "replay": "server.cli.replay:replay",
     "agent": "server.cli.agent:agent",
+    "detect": "server.cli.detect:detect",
 }
 
 

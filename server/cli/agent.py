@@ -18,7 +18,7 @@ import signal
 import threading
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -92,6 +92,10 @@ def agent(
         typer.Option(help="UTC seconds at which the emulated person starts (shared by the team)"),
     ] = None,
     seed: Annotated[int, typer.Option(help="seed of the emulated detector's noise")] = 0,
+    calibration: Annotated[
+        Path | None,
+        typer.Option(help="the camera's OpenCV YAML calibration, for `skyring detect` (docs/detection.md)"),
+    ] = None,
 ) -> None:
     """Run one MAV's onboard agent: its controller beside its PX4, talking to teammates and the station over
     Zenoh."""
@@ -123,8 +127,22 @@ def agent(
     logging.basicConfig(
         level=logging.WARNING, format=f"%(levelname)s agent {vehicle_id} %(name)s: %(message)s"
     )
-    options = dict(
-        vehicle_id=vehicle_id, team_size=team_size, config=config, params=params, method=method, seed=seed
+    from vehicles.detect.calibration import Calibration, CalibrationError
+
+    try:
+        camera = (
+            Calibration.load(calibration) if calibration is not None else Calibration.from_camera_params()
+        )
+    except CalibrationError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--calibration") from None
+    options: dict[str, Any] = dict(
+        vehicle_id=vehicle_id,
+        team_size=team_size,
+        config=config,
+        params=params,
+        method=method,
+        seed=seed,
+        calibration=camera,
     )
     if sim:
         run_sim_agent(**options)
@@ -141,7 +159,7 @@ def agent(
         )
 
 
-def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_factory):
+def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_factory, calibration=None):
     from controller.params import ControllerParams
     from controller.warmup import warm_up
     from vehicles.net.onboard import OnboardAgent
@@ -158,6 +176,7 @@ def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_fact
             bus=bus,
             controller_params=ControllerParams(method=method),
             params=params,
+            calibration=calibration,
         )
     except BaseException:
         bus.close()
@@ -165,7 +184,9 @@ def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_fact
     return bus, autopilot, onboard
 
 
-def run_sim_agent(*, vehicle_id: int, team_size: int, config, params, method: Method, seed: int) -> None:
+def run_sim_agent(
+    *, vehicle_id: int, team_size: int, config, params, method: Method, seed: int, calibration=None
+) -> None:
     """The agent of a rehearsal vehicle (served by the world process) until SIGINT/SIGTERM."""
     from vehicles.net.remote_sim import RemoteAutopilot
 
@@ -176,6 +197,7 @@ def run_sim_agent(*, vehicle_id: int, team_size: int, config, params, method: Me
         params=params,
         method=method,
         autopilot_factory=lambda b: RemoteAutopilot(b, vehicle_id=vehicle_id),
+        calibration=calibration,
     )
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -205,6 +227,7 @@ async def run_px4_agent(
     origin: str | None,
     emulate_camera: str,
     person_epoch: float | None,
+    calibration=None,
 ) -> None:
     """The agent of a PX4 vehicle: connect through MAVSDK, fly until SIGINT/SIGTERM, land, disconnect."""
     import mavsdk
@@ -245,6 +268,7 @@ async def run_px4_agent(
         params=params,
         method=method,
         autopilot_factory=lambda b: px4,
+        calibration=calibration,
     )
     camera = None
     if emulate_camera != "off":

@@ -144,7 +144,10 @@ async def serve_agents(
     if flight_log is not None:
         agents.station.attach_log(flight_log)
 
-    def ready(urls: Urls, _ui: object) -> None:
+    def ready(urls: Urls, ui: object) -> None:
+        from server.station.camera_reports import show_camera_reports
+
+        show_camera_reports(agents.bus, ui.server)  # type: ignore[attr-defined] - a webui.app.OperatorUi
         where = "spawned on 127.0.0.1" if mode == "spawn" else f"team {config.team} on Zenoh"
         typer.echo(f"agents:         {vehicles} ({where})")
         typer.echo(f"operator view:  {urls.operator}")

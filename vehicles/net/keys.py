@@ -2,6 +2,9 @@
 
     skyring/<team>/agent/<id>/plan        PlanBody       agent <id> -> teammates, station       10 Hz
     skyring/<team>/agent/<id>/detection   DetectionBody  <id>'s detector -> its agent, teammates  4 Hz
+                                          (or <id>'s agent, from its camera's pixels -> teammates)
+    skyring/<team>/agent/<id>/camera      CameraBody     `skyring detect` on <id> -> its agent  per frame
+    skyring/<team>/agent/<id>/camera_report  CameraReportBody  `skyring detect` -> station       1 Hz
     skyring/<team>/agent/<id>/state       StateBody      agent <id> -> station (its heartbeat)   10 Hz
     skyring/<team>/agent/<id>/ack         AckBody        agent <id> -> station                   per command
     skyring/<team>/station/heartbeat      HeartbeatBody  station -> agents                        2 Hz
@@ -20,7 +23,7 @@ import re
 from dataclasses import dataclass
 
 ROOT = "skyring"
-AGENT_TOPICS = ("plan", "detection", "state", "ack")
+AGENT_TOPICS = ("plan", "detection", "state", "ack", "camera", "camera_report")
 STATION_TOPICS = ("heartbeat", "command")
 SIM_TOPICS = ("telemetry", "autopilot")
 _TEAM = re.compile(r"^[A-Za-z0-9_-]{1,32}$")

@@ -37,6 +37,8 @@ from controller.messages import Obstacle
 from controller.params import ControllerParams, FormationParams
 from vehicles.agent import Agent, AgentInputs, AgentParams
 from vehicles.autopilot import Autopilot
+from vehicles.detect.calibration import Calibration
+from vehicles.detect.converter import ConverterStats, DetectionConverter
 from vehicles.link_loss import silent_teammate_obstacle
 from vehicles.net import wire
 from vehicles.net.guard import Received
@@ -131,8 +133,11 @@ class OnboardAgent:
         agent_params: AgentParams | None = None,
         mission_params: MissionParams | None = None,
         params: OnboardParams | None = None,
+        calibration: Calibration | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
+        """calibration: the MAV's camera, for the pixel detections of `skyring detect` on its camera key
+        (default: the simulated camera's)."""
         self.vehicle_id = int(vehicle_id)
         self.params = params or OnboardParams()
         self._cparams = controller_params or ControllerParams()
@@ -140,9 +145,17 @@ class OnboardAgent:
         self._bus = bus
         self._clock = clock
         self.links = ZenohLinks(bus, vehicle_id=self.vehicle_id)
+        self.converter = DetectionConverter(
+            vehicle_id=self.vehicle_id, calibration=calibration or Calibration.from_camera_params()
+        )
         self.pilot = VehiclePilot(
             autopilot=autopilot,
-            agent=Agent(vehicle_id=self.vehicle_id, params=self._cparams, agent_params=agent_params),
+            agent=Agent(
+                vehicle_id=self.vehicle_id,
+                params=self._cparams,
+                agent_params=agent_params,
+                converter=self.converter,
+            ),
             params=self._mparams,
             clock=time.perf_counter,
         )
@@ -232,6 +245,7 @@ class OnboardAgent:
                 AgentInputs(
                     own=pilot.state,
                     detections=detections,
+                    camera=self.links.own_camera(),
                     received=received,
                     obstacles=self._obstacles + silent,
                     formation=self._formation,
@@ -373,7 +387,17 @@ class OnboardAgent:
             hb_stamp=heartbeat[0] if heartbeat is not None else None,
             hb_received=heartbeat[1] if heartbeat is not None else None,
             station_lost=self.station_lost,
+            camera=_camera_counts(self.converter.stats()),
         )
+
+
+def _camera_counts(stats: ConverterStats) -> dict[str, int]:
+    """The camera converter's counts for the state message; latencies in whole milliseconds (-1: none)."""
+    out = {"received": stats.received, "converted": stats.converted, "pending": stats.pending}
+    out.update({f"rejected_{k}": v for k, v in stats.rejected})
+    for name, value in (("latency_p50_ms", stats.latency_p50_s), ("latency_max_ms", stats.latency_max_s)):
+        out[name] = int(round(value * 1e3)) if math.isfinite(value) else -1
+    return out
 
 
 def _fields(value: object) -> dict[str, int]:

@@ -34,12 +34,15 @@ import numpy as np
 from controller.messages import Detection, HorizonPlan, Obstacle, PersonEstimate
 from controller.params import FormationParams
 from vehicles.autopilot import AutopilotState, FlightMode, Setpoint
+from vehicles.detect.pixels import CameraDetection, PersonPixels
+from vehicles.detect.runner import CameraReport
 
 WIRE_VERSION = 1
 MAX_MESSAGE_BYTES = 16 * 1024  # a state message is ~2.5 kB, a plan ~1 kB; anything larger is refused unread
 MAX_PLAN_STATES = 64
 MAX_OBSTACLES = 64
 MAX_TEXT = 400
+THUMBNAIL_BYTES = 12_000  # a camera report's JPEG (320 px wide); the whole message stays below the limit
 STATION_ID = 0
 MAX_VEHICLE_ID = 255
 
@@ -157,7 +160,8 @@ class StateBody(_Body, frozen=True):
     over the last few seconds; tracker/counters: TrackerStats/AgentCounters fields; rejected: network
     messages this agent refused, by reason; hb_stamp / hb_received: the last station heartbeat's stamp and
     when it arrived (agent UTC), for the station's clock-offset measurement; station_lost: no heartbeat for
-    longer than the station timeout.
+    longer than the station timeout; camera: the camera converter's counts (received, converted, pending,
+    rejected_<reason>, latency_p50_ms and latency_max_ms from capture to conversion, -1 before the first).
     """
 
     phase: Annotated[str, msgspec.Meta(max_length=16)]
@@ -178,6 +182,7 @@ class StateBody(_Body, frozen=True):
     tracker: Counts = msgspec.field(default_factory=dict)
     counters: Counts = msgspec.field(default_factory=dict)
     rejected: Counts = msgspec.field(default_factory=dict)
+    camera: Counts = msgspec.field(default_factory=dict)
     hb_stamp: float | None = None
     hb_received: float | None = None
     station_lost: bool = False
@@ -211,6 +216,43 @@ class AckBody(_Body, frozen=True):
     message: Text = ""
 
 
+class CameraBody(_Body, frozen=True):
+    """One person seen by the sender's camera (vehicles.detect.pixels.CameraDetection), for its own agent to
+    place with its pose: stamp_s the capture time (UTC), pixels in the raw image of image_size_px."""
+
+    stamp_s: float
+    frame_seq: Annotated[int, msgspec.Meta(ge=0)]
+    image_size_px: tuple[
+        Annotated[int, msgspec.Meta(gt=0, le=20_000)], Annotated[int, msgspec.Meta(gt=0, le=20_000)]
+    ]
+    head_px: tuple[float, float]
+    feet_px: tuple[float, float]
+    head_conf: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+    feet_conf: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+    box_px: tuple[float, float, float, float]
+    score: float = 1.0
+    method: Annotated[str, msgspec.Meta(max_length=16)] = ""
+
+
+class CameraReportBody(_Body, frozen=True):
+    """How the sender's camera and detector are doing (vehicles.detect.runner.CameraReport), about once a
+    second, with a small JPEG of the newest overlaid frame for the operator page."""
+
+    stamp_s: float
+    state: Annotated[str, msgspec.Meta(max_length=16)]
+    frames: Annotated[int, msgspec.Meta(ge=0)]
+    corrupt: Annotated[int, msgspec.Meta(ge=0)]
+    reconnects: Annotated[int, msgspec.Meta(ge=0)]
+    stalls: Annotated[int, msgspec.Meta(ge=0)]
+    frame_age_s: float | None
+    fps: float
+    detections: Annotated[int, msgspec.Meta(ge=0)]
+    detector_errors: Annotated[int, msgspec.Meta(ge=0)]
+    backend: Annotated[str, msgspec.Meta(max_length=64)]
+    message: Text = ""
+    thumbnail_jpeg: Annotated[bytes, msgspec.Meta(max_length=THUMBNAIL_BYTES)] | None = None
+
+
 BODIES: dict[str, type[_Body]] = {
     "plan": PlanBody,
     "detection": DetectionBody,
@@ -220,6 +262,8 @@ BODIES: dict[str, type[_Body]] = {
     "heartbeat": HeartbeatBody,
     "command": CommandBody,
     "ack": AckBody,
+    "camera": CameraBody,
+    "camera_report": CameraReportBody,
 }
 KIND_OF = {t: k for k, t in BODIES.items()}
 
@@ -305,6 +349,62 @@ def detection_from_wire(body: DetectionBody, *, source_id: int) -> Detection:
         stamp_s=body.stamp_s,
         position_m=np.array(body.position_m),
         cov_m2=np.array(body.cov_m2).reshape(3, 3),
+    )
+
+
+def camera_to_wire(det: CameraDetection) -> CameraBody:
+    p = det.person
+    return CameraBody(
+        stamp_s=float(det.stamp_s),
+        frame_seq=int(det.frame_seq),
+        image_size_px=(int(det.image_size_px[0]), int(det.image_size_px[1])),
+        head_px=(float(p.head_px[0]), float(p.head_px[1])),
+        feet_px=(float(p.feet_px[0]), float(p.feet_px[1])),
+        head_conf=float(p.head_conf),
+        feet_conf=float(p.feet_conf),
+        box_px=(float(p.box_px[0]), float(p.box_px[1]), float(p.box_px[2]), float(p.box_px[3])),
+        score=float(p.score),
+        method=p.method[:16],
+    )
+
+
+def camera_from_wire(body: CameraBody, *, vehicle_id: int) -> CameraDetection:
+    _finite(body.stamp_s, *body.head_px, *body.feet_px, *body.box_px, body.score)
+    person = PersonPixels(
+        head_px=np.array(body.head_px),
+        feet_px=np.array(body.feet_px),
+        head_conf=body.head_conf,
+        feet_conf=body.feet_conf,
+        box_px=np.array(body.box_px),
+        score=body.score,
+        method=body.method,
+    )
+    return CameraDetection(
+        vehicle_id=vehicle_id,
+        stamp_s=body.stamp_s,
+        frame_seq=body.frame_seq,
+        image_size_px=body.image_size_px,
+        person=person,
+    )
+
+
+def camera_report_to_wire(rep: CameraReport) -> CameraReportBody:
+    c = rep.camera
+    thumb = rep.thumbnail_jpeg if rep.thumbnail_jpeg and len(rep.thumbnail_jpeg) <= THUMBNAIL_BYTES else None
+    return CameraReportBody(
+        stamp_s=float(rep.stamp_s),
+        state=str(c.state),
+        frames=c.frames,
+        corrupt=c.corrupt,
+        reconnects=c.reconnects,
+        stalls=c.stalls,
+        frame_age_s=c.frame_age_s if math.isfinite(c.frame_age_s) else None,
+        fps=float(rep.fps) if math.isfinite(rep.fps) else 0.0,
+        detections=rep.detections,
+        detector_errors=rep.detector_errors,
+        backend=rep.backend[:64],
+        message=(rep.message or c.message)[:MAX_TEXT],
+        thumbnail_jpeg=thumb,
     )
 
 
