@@ -304,6 +304,7 @@ class ModelPredictiveController:
         self._state_min_c = np.ascontiguousarray(self._state_min)
         self._state_max_c = np.ascontiguousarray(self._state_max)
         self._effort_code = EFFORT_MODES.index(params.effort)
+        self._work: tuple | None = None  # _solve_exact's work arrays
         self._default_w_terminal = np.diag(
             [params.terminal_position_weight] * 3 + [params.terminal_velocity_weight] * 3
         )
@@ -526,13 +527,20 @@ class ModelPredictiveController:
         call. None when a number is not finite or implausible (the caller says which)."""
         prm = self._params
         n = self._n_steps
-        q = np.empty(self._n_exact)
-        lo = np.empty(self._l_exact.shape[0])
-        hi = np.empty(self._l_exact.shape[0])
         qp = self._qp
-        z = np.empty(self._n_exact)
-        rows = np.empty(qp.row_count)
-        gradient = np.empty(qp.resting_count)
+        # Work arrays, reused from solve to solve (nothing returned refers to them).
+        if self._work is None or self._work[0] is not qp:
+            rows_n = self._l_exact.shape[0]
+            self._work = (
+                qp,
+                np.empty(self._n_exact),
+                np.empty(rows_n),
+                np.empty(rows_n),
+                np.empty(self._n_exact),
+                np.empty(qp.row_count),
+                np.empty(qp.resting_count),
+            )
+        _, q, lo, hi, z, rows, gradient = self._work
         inputs = np.empty((n, 3))
         positions = np.empty((n + 1, 3))
         velocities = np.empty((n + 1, 3))
