@@ -38,6 +38,8 @@ DAQP_INF = 1.0e30  # DAQP's own "no bound"
 STATUSES = ("solved", "infeasible", "failed")
 PATHS = ("closed_form", "blocks", "active_set")
 
+Csr = tuple[np.ndarray, np.ndarray, np.ndarray]  # (indptr, indices, values) of a sparse matrix, row by row
+
 
 @dataclass(frozen=True, eq=False)
 class QpResult:
@@ -90,7 +92,7 @@ def closed_form_kernel(
     return ok
 
 
-def _csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _csr(matrix: np.ndarray) -> Csr:
     """(indptr, indices, values) of a dense matrix's non-zeros, row by row."""
     rows, cols = np.nonzero(matrix)
     indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=matrix.shape[0]))]).astype(np.int64)
@@ -142,13 +144,14 @@ class _Block:
         q_b = q[self.variables]
         lo_b = np.maximum(lo[self.rows], -DAQP_INF)
         hi_b = np.minimum(hi[self.rows], DAQP_INF)
-        if self.model is None:
-            self.model = daqp.Model()
-            self.model.settings = settings
-            self.model.setup(self.p, q_b, self.a, hi_b, lo_b, np.zeros(len(self.rows), dtype=np.intc))
+        model = self.model
+        if model is None:
+            self.model = model = daqp.Model()
+            model.settings = settings
+            model.setup(self.p, q_b, self.a, hi_b, lo_b, np.zeros(len(self.rows), dtype=np.intc))
         else:
-            self.model.update(f=q_b, bupper=hi_b, blower=lo_b)
-        x, _, flag, info = self.model.solve()
+            model.update(f=q_b, bupper=hi_b, blower=lo_b)
+        x, _, flag, info = model.solve()
         return np.asarray(x, dtype=float), int(flag), int(info["iterations"]), float(info["solve_time"])
 
 
@@ -230,7 +233,7 @@ class ExactQp:
         return self._gain @ q
 
     @property
-    def kernel_data(self) -> tuple:
+    def kernel_data(self) -> tuple[Csr, Csr, np.ndarray, Csr, float, float]:
         """The leading arguments of `closed_form_kernel` for this problem (sparse gain, A, resting rows of P,
         tolerances), for callers that run step 1 inside their own compiled code and then call `finish`."""
         return (self._gain_csr, self._a_csr, self._rest_idx, self._p_rest_csr, self._tol, self._opt_tol)
@@ -319,16 +322,17 @@ class ExactQp:
             hi_all = np.concatenate([hi, extra_hi])
         lo_all = np.maximum(lo_all, -DAQP_INF)
         hi_all = np.minimum(hi_all, DAQP_INF)
-        if self._full is None or self._full_rows != a_all.shape[0]:
-            self._full = daqp.Model()
-            self._full.settings = self._settings
-            self._full.setup(
+        full = self._full
+        if full is None or self._full_rows != a_all.shape[0]:
+            self._full = full = daqp.Model()
+            full.settings = self._settings
+            full.setup(
                 self._p, q, a_all, hi_all, lo_all, np.zeros(a_all.shape[0], dtype=np.intc), primal_start=z
             )
             self._full_rows = a_all.shape[0]
         else:
-            self._full.update(f=q, A=a_all, bupper=hi_all, blower=lo_all)
-        x, _, flag, info = self._full.solve()
+            full.update(f=q, A=a_all, bupper=hi_all, blower=lo_all)
+        x, _, flag, info = full.solve()
         iterations += int(info["iterations"])
         time_s += float(info["solve_time"])
         if flag < 0:

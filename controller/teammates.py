@@ -95,31 +95,34 @@ class TeammateTable:
     not older than a limit, plus optional extra plans (the agent's phantoms), for the formation controller.
     """
 
+    _COLUMNS = ("_positions", "_lengths", "_stamps", "_dts", "_radii", "_in_formation", "_row_ids")
+
     def __init__(self, *, own_id: int, plan_length: int, capacity: int = 16) -> None:
         self._own = int(own_id)
         self._plans: dict[int, HorizonPlan] = {}
-        self._ids = np.zeros(0, dtype=np.int64)
-        self._allocate(max(int(capacity), 1), max(int(plan_length), 2))
         self._count = 0
+        capacity, length = max(int(capacity), 1), max(int(plan_length), 2)
+        # Row r holds one teammate's latest plan: positions (capacity, length, 3), its valid length, stamp,
+        # step, covariance radius, in-formation flag and vehicle id; rows sorted by vehicle id.
+        self._positions = np.zeros((capacity, length, 3))
+        self._lengths = np.zeros(capacity, dtype=np.int64)
+        self._stamps = np.zeros(capacity)
+        self._dts = np.ones(capacity)
+        self._radii = np.zeros(capacity)
+        self._in_formation = np.zeros(capacity, dtype=np.bool_)
+        self._row_ids = np.zeros(capacity, dtype=np.int64)
 
-    def _allocate(self, capacity: int, length: int) -> None:
-        old = self._count if hasattr(self, "_count") else 0
+    def _grow(self, capacity: int, length: int) -> None:
+        """Re-allocate every column for `capacity` rows of `length` states, keeping the stored rows."""
+        old = self._count
         positions = np.zeros((capacity, length, 3))
-        fields = {
-            "_lengths": np.zeros(capacity, dtype=np.int64),
-            "_stamps": np.zeros(capacity),
-            "_dts": np.ones(capacity),
-            "_radii": np.zeros(capacity),
-            "_in_formation": np.zeros(capacity, dtype=np.bool_),
-            "_row_ids": np.zeros(capacity, dtype=np.int64),
-        }
-        if old:
-            positions[:old, : self._positions.shape[1]] = self._positions[:old]
-            for name, arr in fields.items():
-                arr[:old] = getattr(self, name)[:old]
+        positions[:old, : self._positions.shape[1]] = self._positions[:old]
         self._positions = positions
-        for name, arr in fields.items():
-            setattr(self, name, arr)
+        for name in self._COLUMNS[1:]:
+            column = getattr(self, name)
+            grown = np.ones(capacity, dtype=column.dtype) if name == "_dts" else np.zeros(capacity, column.dtype)
+            grown[:old] = column[:old]
+            setattr(self, name, grown)
 
     @property
     def count(self) -> int:
@@ -159,14 +162,14 @@ class TeammateTable:
         row = int(np.searchsorted(rows, vid))
         if old is None:
             if self._count == self._positions.shape[0]:
-                self._allocate(2 * self._count, self._positions.shape[1])
-            for name in ("_positions", "_lengths", "_stamps", "_dts", "_radii", "_in_formation", "_row_ids"):
+                self._grow(2 * self._count, self._positions.shape[1])
+            for name in self._COLUMNS:
                 arr = getattr(self, name)
                 arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
             self._count += 1
         length = positions.shape[0]
         if length > self._positions.shape[1]:
-            self._allocate(self._positions.shape[0], length)
+            self._grow(self._positions.shape[0], length)
         if old is None or old.position_cov_m2 is not cov:  # the sender's covariance rarely changes
             self._radii[row] = covariance_radius_m(cov)
         self._plans[vid] = plan

@@ -14,7 +14,7 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import viser
@@ -118,12 +118,10 @@ class OperatorPanel:
             start = gui.add_button("Start formation", color="green", icon=viser.Icon.PLAYER_PLAY)
             stop = gui.add_button("Stop formation (hold)", icon=viser.Icon.PLAYER_PAUSE)
             start.on_click(
-                lambda e: self._run(
-                    e.client, lambda: actions.set_formation_enabled(True), "Formation started"
-                )
+                lambda e: self._do(e.client, lambda: actions.set_formation_enabled(True), "Formation started")
             )
             stop.on_click(
-                lambda e: self._run(
+                lambda e: self._do(
                     e.client,
                     lambda: actions.set_formation_enabled(False),
                     "Formation stopped: MAVs hold position",
@@ -213,7 +211,7 @@ class OperatorPanel:
             for obstacle_id in ids:
                 button = self._server.gui.add_button(f"Remove {obstacle_id}", icon=viser.Icon.TRASH)
                 button.on_click(
-                    lambda e, oid=obstacle_id: self._run(
+                    lambda e, oid=obstacle_id: self._do(
                         e.client, lambda: self._actions.remove_obstacle(oid), f"Obstacle {oid} removed"
                     )
                 )
@@ -236,6 +234,10 @@ class OperatorPanel:
         self.error_plot.data = (t, err)
 
     # ---- operator input ------------------------------------------------------------------------------------
+
+    def _do(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> None:
+        """`_run` for a button callback, which must return None."""
+        self._run(client, action, done)
 
     def _run(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> bool:
         """Run one operator action; tell the client the outcome. Never raises: a GUI callback must not die."""
@@ -377,7 +379,9 @@ def _set_range(slider: Any, low: float, high: float) -> None:
         slider.max = high
 
 
-def _notify(client: viser.ClientHandle | None, title: str, body: str, *, color: str) -> None:
+def _notify(
+    client: viser.ClientHandle | None, title: str, body: str, *, color: Literal["red", "green", "blue"]
+) -> None:
     if client is None:
         return
     try:

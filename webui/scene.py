@@ -174,7 +174,8 @@ class SceneRenderer:
             return
         self._covariance.position = estimate.position_m
         self._covariance.wxyz = wxyz
-        self._covariance.scale = tuple(float(a) for a in np.maximum(semi_axes, 1e-3))
+        sx, sy, sz = (float(a) for a in np.maximum(semi_axes, 1e-3))
+        self._covariance.scale = (sx, sy, sz)
         self._covariance.visible = True
 
     def _draw_obstacles(self, obstacles: tuple[Obstacle, ...]) -> None:

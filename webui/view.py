@@ -138,6 +138,7 @@ class OperatorActions(Protocol):
 
     def add_obstacle(self, *, x_m: float, y_m: float, radius_m: float) -> str:
         """Add a virtual obstacle (vertical cylinder) at ENU (x_m, y_m); returns its id."""
+        ...
 
     def remove_obstacle(self, obstacle_id: str) -> None:
         """Remove a virtual obstacle by id."""

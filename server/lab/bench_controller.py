@@ -5,8 +5,9 @@ and every teammate's, each at 4 Hz, so about K / 25 per tick), predict the estim
 controller's step (teammates' plans on our horizon from the plan table, every external input, the MPC solve,
 the way-point). It is timed for K = 3, 8, 16 MAVs (K - 1 teammates publishing plans at 10 Hz, the paper's 13
 trees, the person on the paper's path) in a running closed loop, so plans and inputs look like a flight.
-Targets: median <= 0.1 ms and p99 <= 0.5 ms per tick at K = 16; the MPC >= 100x faster than the same QP
-through CVXPY + OSQP, with the same first input to 1e-6. Speed is measured here, never in tests.
+Targets (docs/architecture.md#performance-targets): median <= 0.1 ms and p99 <= 0.5 ms per tick at K = 16;
+the MPC >= 100x faster than the same QP through CVXPY + OSQP, with the same first input to 1e-6. Speed is
+measured here, never in tests.
 """
 
 from __future__ import annotations

@@ -1,17 +1,19 @@
 """`skyring bench sim`: how fast the embedded simulator runs 16 MAVs at the paper's 100 Hz control rate.
 
-Target: at least 10x real time in one process on one core. The real-time factor is measured after a 10 s
-warm-up (takeoff), like the report's `realtime_factor`: world, 16 agents (tracker, controller), links and the
-runner's bookkeeping included. Beside the wall-clock factor the bench prints the factor in CPU time of this
-process, which is what the wall-clock one would be on an otherwise idle core (on a shared machine the wall
-clock also counts other processes' time). Two rows: the MPC solved every control tick (the paper), and
-solved at 10 Hz with the set-points following the latest plan in between (`--replan-rate 10`).
+Target (docs/architecture.md#performance-targets): at least 10x real time in one process on one core. The
+real-time factor is measured after a 10 s warm-up (takeoff), like the report's `realtime_factor`: world, 16
+agents (tracker, controller), links and the runner's bookkeeping included. Beside the wall-clock factor the
+bench prints the factor in CPU time of this process, which is what the wall-clock one would be on an otherwise
+idle core (on a shared machine the wall clock also counts other processes' time). Two rows: the MPC solved
+every control tick (the paper), and solved at 10 Hz with the set-points following the latest plan in between
+(`--replan-rate 10`).
 """
 
 from __future__ import annotations
 
 import time
 
+from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
 
 TARGET_REALTIME_FACTOR = 10.0
@@ -38,7 +40,7 @@ def run(*, repeats: int) -> None:
             seed=1,
             trees="paper",
             person="paper",
-            method="active",
+            method=Method.ACTIVE,
             replan_hz=replan_hz,
         )
         marks: list[tuple[float, float]] = []  # (simulated s, CPU s) at each progress call after warm-up

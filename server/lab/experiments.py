@@ -126,7 +126,7 @@ class ProfileOverrides:
     rate_hz: float | None = None
 
 
-# ---- the paper's protocol (METHOD.md "Experiments in the paper") -------------------------------------------
+# ---- the paper's protocol (docs/method.md#experiments) ----------------------------------------------------
 
 PAPER_METHODS: tuple[tuple[str, str, str], ...] = (
     # (label, method, virtual obstacles): SE4 avoids the paper's 13 tree positions as virtual obstacles
@@ -504,21 +504,21 @@ def run_all(
 
     pending: list[int] = []
     for i, spec in enumerate(specs):
-        done = load_run(spec, out_dir) if resume else None
-        if done is None:
+        on_disk = load_run(spec, out_dir) if resume else None
+        if on_disk is None:
             pending.append(i)
         else:
-            finished(i, done)
+            finished(i, on_disk)
     if not pending:
         return [results[i] for i in range(total)]
     if cluster is not None:
 
-        def done(i: int, result: RunResult) -> None:
+        def written(i: int, result: RunResult) -> None:
             write_run(result, out_dir)
             finished(i, result)
 
         _run_on_cluster(
-            specs, pending, address=cluster, simulator=simulator, done=done, timeout_s=cluster_timeout_s
+            specs, pending, address=cluster, simulator=simulator, done=written, timeout_s=cluster_timeout_s
         )
         return [results[i] for i in range(total)]
     executor = _fresh_process_pool(jobs=min(jobs, len(pending)), simulator=simulator)

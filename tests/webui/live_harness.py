@@ -59,8 +59,10 @@ class Live:
     def mean_horizontal_distance_m(self) -> float:
         with self.station.lock:
             snap = self.station.snapshot()
+            assert snap.person_truth is not None
             person = snap.person_truth.position_m[:2]
-            return float(np.mean([np.hypot(*(v.autopilot.position_m[:2] - person)) for v in snap.vehicles]))
+            flying = [v.autopilot.position_m[:2] for v in snap.vehicles if v.autopilot is not None]
+            return float(np.mean([np.hypot(*(p - person)) for p in flying]))
 
     def phases(self) -> set[Phase]:
         return {v.phase for v in self.station.snapshot().vehicles}
@@ -102,14 +104,16 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
     thread = threading.Thread(target=serve, name="ground-station", daemon=True)
     thread.start()
     assert ready.wait(30.0), "the ground station did not start within 30 s"
-    if "error" in box:
-        raise box["error"]
-    live = Live(
-        station=station,
-        urls=box["urls"],
-        ui=box["ui"],
-        stop=lambda: loop.call_soon_threadsafe(stop_event.set),
-    )
+    error = box.get("error")
+    if isinstance(error, BaseException):
+        raise error
+    urls = box["urls"]
+    assert isinstance(urls, Urls)
+
+    def stop() -> None:
+        loop.call_soon_threadsafe(stop_event.set)
+
+    live = Live(station=station, urls=urls, ui=box["ui"], stop=stop)
     return live, thread
 
 
