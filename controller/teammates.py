@@ -120,7 +120,8 @@ class TeammateTable:
         self._positions = positions
         for name in self._COLUMNS[1:]:
             column = getattr(self, name)
-            grown = np.ones(capacity, dtype=column.dtype) if name == "_dts" else np.zeros(capacity, column.dtype)
+            fill = np.ones if name == "_dts" else np.zeros
+            grown = fill(capacity, dtype=column.dtype)
             grown[:old] = column[:old]
             setattr(self, name, grown)
 

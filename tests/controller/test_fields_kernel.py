@@ -12,21 +12,24 @@ import pytest
 import controller.formation as formation
 from controller.fields import external_inputs
 from controller.fields_kernel import TERMS, external_inputs_compiled
+from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
 
 FLIGHTS = (
-    dict(vehicles=8, duration_s=16.0, warmup_s=15.0, rate_hz=10.0, start="cluster", seed=3),
-    dict(
+    SimConfig(vehicles=8, duration_s=16.0, warmup_s=15.0, rate_hz=10.0, start="cluster", seed=3),
+    SimConfig(
         vehicles=5,
         duration_s=14.0,
         warmup_s=13.0,
         rate_hz=10.0,
-        method="dqmpc",
+        method=Method.DQMPC,
         start="cluster",
         trees="none",
     ),
-    dict(vehicles=5, duration_s=14.0, warmup_s=13.0, rate_hz=10.0, virtual_obstacles="paper", trees="none"),
-    dict(vehicles=16, duration_s=11.0, warmup_s=10.0, rate_hz=10.0, seed=4, comm_loss=0.5),
+    SimConfig(
+        vehicles=5, duration_s=14.0, warmup_s=13.0, rate_hz=10.0, virtual_obstacles="paper", trees="none"
+    ),
+    SimConfig(vehicles=16, duration_s=11.0, warmup_s=10.0, rate_hz=10.0, seed=4, comm_loss=0.5),
 )
 
 
@@ -42,7 +45,7 @@ def recorded() -> list[dict]:
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(formation, "external_inputs_compiled", reference)
         for flight in FLIGHTS:
-            run_simulation(SimConfig(**flight))
+            run_simulation(flight)
     return calls
 
 

@@ -24,16 +24,27 @@ G = np.array([0.0, 0.0, -PARAMS.gravity_mps2])
 HOVER = np.array([0.0, 0.0, PARAMS.gravity_mps2])
 
 
-def solve(controller: ModelPredictiveController, **overrides) -> MpcSolution:
-    args = dict(
-        position_m=np.array([0.0, 0.0, 6.0]),
-        velocity_mps=np.zeros(3),
-        target_position_m=np.array([0.0, 0.0, 6.0]),
-        target_velocity_mps=np.zeros(3),
-        external_inputs_mps2=np.zeros((STEPS, 3)),
+def solve(
+    controller: ModelPredictiveController,
+    *,
+    position_m: np.ndarray | None = None,
+    velocity_mps: np.ndarray | None = None,
+    target_position_m: np.ndarray | None = None,
+    target_velocity_mps: np.ndarray | None = None,
+    external_inputs_mps2: np.ndarray | None = None,
+    terminal_position_weight: np.ndarray | None = None,
+    terminal_velocity_weight: np.ndarray | None = None,
+) -> MpcSolution:
+    """One solve of a hover problem at (0, 0, 6) m, with the given arguments replacing its parts."""
+    return controller.solve(
+        position_m=np.array([0.0, 0.0, 6.0]) if position_m is None else position_m,
+        velocity_mps=np.zeros(3) if velocity_mps is None else velocity_mps,
+        target_position_m=np.array([0.0, 0.0, 6.0]) if target_position_m is None else target_position_m,
+        target_velocity_mps=np.zeros(3) if target_velocity_mps is None else target_velocity_mps,
+        external_inputs_mps2=np.zeros((STEPS, 3)) if external_inputs_mps2 is None else external_inputs_mps2,
+        terminal_position_weight=terminal_position_weight,
+        terminal_velocity_weight=terminal_velocity_weight,
     )
-    args.update(overrides)
-    return controller.solve(**args)
 
 
 def state_space_rollout(x0: np.ndarray, inputs: np.ndarray, external: np.ndarray, dt: float) -> np.ndarray:
@@ -413,16 +424,16 @@ def test_receding_horizon_warm_start_saves_iterations():
     warm, cold = [], []
     for tick in range(20):
         angle = 0.05 * tick
-        problem = dict(
+        problem: dict[str, np.ndarray] = dict(
             position_m=position,
             velocity_mps=velocity,
             target_position_m=np.array([8.0 * np.cos(angle), 8.0 * np.sin(angle), 8.0]),
             target_velocity_mps=np.array([-np.sin(angle), np.cos(angle), 0.0]),
             external_inputs_mps2=np.tile([0.5 * np.sin(angle), 0.3, 0.0], (STEPS, 1)),
         )
-        sol = controller.solve(**problem)
+        sol = solve(controller, **problem)
         warm.append(sol.iterations)
-        cold.append(ModelPredictiveController(OSQP).solve(**problem).iterations)
+        cold.append(solve(ModelPredictiveController(OSQP), **problem).iterations)
         position, velocity = sol.positions_m[1], sol.velocities_mps[1]
     assert sum(warm[1:]) < 0.6 * sum(cold[1:])
 

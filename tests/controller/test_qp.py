@@ -222,6 +222,7 @@ def cvxpy_mpc_reference(
         polishing=True,
     )
     assert problem.status == cp.OPTIMAL
+    assert u.value is not None and p.value is not None and v.value is not None
     return u.value, p.value, v.value
 
 

@@ -42,9 +42,24 @@ def test_paths_equal_teammate_paths_of_the_fresh_plans(seed, price):
             latest[p.vehicle_id] = p
     now, since = 10.2, float(rng.uniform(0.0, 8.0))
     fresh = [latest[v] for v in sorted(latest) if latest[v].stamp_s >= since]
-    kwargs = dict(now_s=now, dt_s=0.1, steps=STEPS, own_cov_radius_m=0.4, params=PARAMS)
-    expected = teammate_paths(fresh, current_position_only=price, **kwargs)
-    got = table.paths(since_s=since, current_position_only=price, **kwargs)
+    expected = teammate_paths(
+        fresh,
+        now_s=now,
+        dt_s=0.1,
+        steps=STEPS,
+        own_cov_radius_m=0.4,
+        params=PARAMS,
+        current_position_only=price,
+    )
+    got = table.paths(
+        since_s=since,
+        now_s=now,
+        dt_s=0.1,
+        steps=STEPS,
+        own_cov_radius_m=0.4,
+        params=PARAMS,
+        current_position_only=price,
+    )
     np.testing.assert_allclose(got.positions_m, expected.positions_m, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(got.vehicle_ids, expected.vehicle_ids)
     np.testing.assert_array_equal(got.in_formation, expected.in_formation)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from filterpy.kalman import predict as filterpy_predict
+from filterpy.kalman import KalmanFilter
 from scipy import stats
 
 from controller.measurement import NoiseParams, sample_detection
@@ -389,8 +389,12 @@ def test_estimate_is_filterpys_prediction_of_the_filter_state():
         tracker._t = 1.0
         dt = float(rng.uniform(0.001, 5.0))
         F, Q = transition(dt_s=dt, params=params)
-        x, P = filterpy_predict(tracker._kf.x, tracker._kf.P, F, Q)
+        reference = KalmanFilter(dim_x=6, dim_z=3)
+        reference.x, reference.P = tracker._kf.x.copy(), tracker._kf.P.copy()
+        reference.predict(F=F, Q=Q)
+        x, P = reference.x, reference.P
         est = tracker.estimate(1.0 + dt)
+        assert est is not None
         np.testing.assert_allclose(est.position_m, x[:3, 0], rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(est.velocity_mps, x[3:, 0], rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(est.cov, 0.5 * (P + P.T), rtol=1e-12, atol=1e-12)

@@ -28,10 +28,13 @@ def _specs() -> list[exp.RunSpec]:
 
 @pytest.fixture(scope="module")
 def cluster():
-    with LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
-    ) as local:
+    local = LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address="127.0.0.1:0"
+    )
+    try:
         yield local.scheduler_address
+    finally:
+        local.close()
 
 
 def _reports(results: list[exp.RunResult]) -> list[dict]:
