@@ -7,10 +7,13 @@ It holds the operator's formation parameters, static and virtual obstacles, and 
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
+    IDLE, airborne --(the operator starts the formation or releases it)--> FORMATION
+    TAKEOFF / FORMATION --(the autopilot lands or returns it by itself)--> LANDING
 
-A MAV that is landing or landed has left formation control: it publishes plans marked not-in-formation (then
-none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. Operator
-actions are methods that take effect at the next `step` (within one control period); a refused action raises
+The roster holds only the vehicles airborne, heard and flown by skyring (vehicles/pilot.py). A MAV that is
+landing or landed has left formation control: it publishes plans marked not-in-formation (then none once on
+the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. Operator actions are
+methods that take effect at the next `step` (within one control period); a refused action raises
 `MissionError` with a message a person can act on and changes nothing.
 """
 
@@ -215,7 +218,8 @@ class Mission:
                 v.start_landing(self._now)
 
     def release(self, vehicle_id: int) -> None:
-        """Give a landed vehicle back to the formation: it takes off again (when formation is enabled)."""
+        """Give a landed vehicle back to the formation: it takes off again (when formation is enabled); or an
+        airborne one skyring does not fly: it joins (`VehiclePilot.release`)."""
         v = self._vehicle(vehicle_id)
         try:
             v.release()
@@ -224,8 +228,13 @@ class Mission:
             raise
 
     def set_formation_enabled(self, enabled: bool) -> None:
-        """Start (True) or stop (False) formation control; stopped MAVs hold position, idle ones stay down."""
+        """Start (True) or stop (False) formation control; stopped MAVs hold position, idle ones stay down.
+        Starting it also brings in the airborne vehicles found flying (adopted) once their autopilot lets
+        them."""
         self._enabled = bool(enabled)
+        if self._enabled:
+            for v in self._vehicles.values():
+                v.formation_started()
 
     # ---- the control tick ---------------------------------------------------------------------------------
     def step(self, now_s: float) -> None:
@@ -280,7 +289,7 @@ class Mission:
             virtual_obstacle_ids=tuple(self._virtual),
             formation=self._formation,
             formation_enabled=self._enabled,
-            slot_count=sum(v.phase in FLYING_PHASES for v in self._vehicles.values()),
+            slot_count=sum(v.in_roster for v in self._vehicles.values()),
             counters=team_counters(vehicles, rejected_actions=self._rejected_actions),
         )
 

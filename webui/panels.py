@@ -27,6 +27,9 @@ log = logging.getLogger(__name__)
 
 PLOT_WINDOW_S = 120.0  # seconds of history the plots show
 STALE_FLAG = "STALE"
+FAILSAFE_FLAG = "FAILSAFE"  # the autopilot runs its own failsafe (PX4: Land, Hold, Return)
+REFUSED_FLAG = "ARMING REFUSED"  # the autopilot refused the take-off; its reason follows
+HELD_FLAG = "CANNOT TAKE OFF HERE"  # the pre-take-off checks (person keep-out, d_min) refuse it
 
 
 AGENT_LOST_FLAG = "AGENT LOST"
@@ -51,19 +54,31 @@ def agent_line(vehicle: VehicleView) -> str:
 
 
 def vehicle_card(vehicle: VehicleView) -> str:
-    """Markdown for one vehicle's card: phase, mode, armed, link age (flagged when stale), solver, battery,
-    and for an onboard agent its link, clock and last command."""
+    """Markdown for one vehicle's card: phase, the autopilot's own mode, armed, link age (flagged when
+    stale), solver, battery; for an onboard agent its link, clock and last command; then, when there is one,
+    the autopilot's failsafe and why, why it refused to arm, and why the ground station would not let it take
+    off where it stands."""
     link = f"{vehicle.link_age_s:.1f} s" + (f" **{STALE_FLAG}**" if vehicle.link_stale else "")
     solver = "-" if vehicle.solver_time_s is None else f"{vehicle.solver_time_s * 1e3:.2f} ms"
     battery = "unknown" if vehicle.battery_fraction is None else f"{vehicle.battery_fraction * 100:.0f} %"
     status = f" ({vehicle.solve_status})" if vehicle.solve_status else ""
-    return (
-        f"**MAV {vehicle.vehicle_id}**: {vehicle.phase}  \n"
-        f"mode {vehicle.mode}, {'armed' if vehicle.armed else 'disarmed'}, "
-        f"{'in air' if vehicle.in_air else 'on ground'}  \n"
-        f"link {link} · solver {solver}{status} · battery {battery}"
-        + (f"  \n{agent_line(vehicle)}" if vehicle.agent is not None else "")
-    )
+    mode = vehicle.autopilot_mode or vehicle.mode
+    formation = " · in formation" if vehicle.in_formation else ""
+    lines = [
+        f"**MAV {vehicle.vehicle_id}**: {vehicle.phase}{formation}",
+        f"autopilot {mode}, {'armed' if vehicle.armed else 'disarmed'}, "
+        f"{'in air' if vehicle.in_air else 'on ground'}",
+        f"link {link} · solver {solver}{status} · battery {battery}",
+    ]
+    if vehicle.agent is not None:
+        lines.append(agent_line(vehicle))
+    if vehicle.failsafe:
+        lines.append(f"**{FAILSAFE_FLAG}**: {vehicle.failsafe_reason or 'the autopilot runs its failsafe'}")
+    if vehicle.arming_refusal:
+        lines.append(f"**{REFUSED_FLAG}**: {vehicle.arming_refusal}")
+    if vehicle.takeoff_check:
+        lines.append(f"**{HELD_FLAG}**: {vehicle.takeoff_check}")
+    return "  \n".join(lines)
 
 
 def status_line(view: SceneView) -> str:
@@ -117,9 +132,7 @@ class OperatorPanel:
             self._h_des.on_update(self._on_formation_input)
             start = gui.add_button("Start formation", color="green", icon=viser.Icon.PLAYER_PLAY)
             stop = gui.add_button("Stop formation (hold)", icon=viser.Icon.PLAYER_PAUSE)
-            start.on_click(
-                lambda e: self._do(e.client, lambda: actions.set_formation_enabled(True), "Formation started")
-            )
+            start.on_click(self._on_start)
             stop.on_click(
                 lambda e: self._do(
                     e.client,
@@ -190,7 +203,8 @@ class OperatorPanel:
         text = vehicle_card(vehicle)
         if card["text"].content != text:
             card["text"].content = text
-        releasable = vehicle.phase.lower() == "landed"
+        adopted = vehicle.phase.lower() == "idle" and vehicle.in_air and not vehicle.failsafe
+        releasable = vehicle.phase.lower() == "landed" or adopted
         if card["release"].visible != releasable:
             card["release"].visible = releasable
 
@@ -328,13 +342,34 @@ class OperatorPanel:
             "All MAVs landing",
         )
 
+    def _on_start(self, event: viser.GuiEvent) -> None:
+        """Start the formation; when the pre-take-off checks refuse it, offer the logged override."""
+        if self._run(event.client, lambda: self._actions.set_formation_enabled(True), "Formation started"):
+            return
+        held = [v for v in self._view.vehicles if v.takeoff_check and v.phase == "idle"]
+        if held:
+            self._confirm(
+                event.client,
+                "Start anyway?",
+                "  \n".join(f"MAV {v.vehicle_id} {v.takeoff_check}" for v in held)
+                + "  \nStarting anyway takes them off where they stand; the override is logged.",
+                "Start anyway (override)",
+                lambda: self._actions.set_formation_enabled(True, override=True),
+                "Formation started: pre-take-off checks overridden (logged)",
+            )
+
     def _on_release(self, event: viser.GuiEvent, vehicle_id: int) -> None:
+        vehicle = next((v for v in self._view.vehicles if v.vehicle_id == vehicle_id), None)
+        check = vehicle.takeoff_check if vehicle is not None else None
+        body = f"MAV {vehicle_id} takes off again and rejoins the formation."
+        if check:
+            body = f"MAV {vehicle_id} {check}.  \nReleasing it overrides the pre-take-off check (logged)."
         self._confirm(
             event.client,
             f"Release MAV {vehicle_id}?",
-            f"MAV {vehicle_id} takes off again and rejoins the formation.",
-            f"Release MAV {vehicle_id}",
-            lambda: self._actions.release(vehicle_id),
+            body,
+            f"Release MAV {vehicle_id}" + (" (override)" if check else ""),
+            lambda: self._actions.release(vehicle_id, override=bool(check)),
             f"MAV {vehicle_id} released",
         )
 

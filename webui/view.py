@@ -45,8 +45,16 @@ class VehicleView:
     horizon plan (M = 0 when none); phase: the mission's phase name (e.g. "formation", "landing", "landed");
     mode: the autopilot flight mode name; link_age_s: seconds since its last telemetry (stale when
     `link_stale`); solver_time_s: the MPC solver's own time of the last solve (0 when the closed form solved
-    it; None before the first); battery_fraction in [0, 1] or None when unknown; agent: its onboard agent's
-    link (None when the agent runs in the station).
+    it; None before the first); battery_fraction in [0, 1] or None when unknown; in_formation: flown by
+    formation control in the roster now; agent: its onboard agent's link (None when the agent runs in the
+    station).
+
+    What the autopilot itself says (the truth when it differs from skyring's reading): autopilot_mode: its own
+    mode name (PX4: "OFFBOARD", "LAND", "HOLD", "RETURN_TO_LAUNCH", ...; "" when the back-end has none);
+    failsafe: it runs one of its own failsafes now, failsafe_reason its words for it; can_arm: its pre-arm
+    checks pass (None: unknown or armed); arming_refusal: its words for the last arming or take-off it
+    refused; takeoff_check: why the ground station would not let this vehicle take off or join the formation
+    where it stands now (inside the person's keep-out, or within d_min of a teammate), None when it may.
     """
 
     vehicle_id: int
@@ -63,6 +71,12 @@ class VehicleView:
     solver_time_s: float | None = None
     battery_fraction: float | None = None
     plan_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    autopilot_mode: str = ""
+    failsafe: bool = False
+    failsafe_reason: str | None = None
+    can_arm: bool | None = None
+    arming_refusal: str | None = None
+    takeoff_check: str | None = None
     agent: AgentView | None = None
 
     def __post_init__(self) -> None:
@@ -149,8 +163,10 @@ class OperatorActions(Protocol):
     def land_all(self) -> None:
         """Land every MAV."""
 
-    def release(self, vehicle_id: int) -> None:
-        """Return a landed MAV to formation control (it takes off again)."""
+    def release(self, vehicle_id: int, *, override: bool = False) -> None:
+        """Return a landed MAV to formation control (it takes off again), or an airborne one skyring does not
+        fly; override: let it take off or join although the pre-take-off checks refuse it (logged)."""
 
-    def set_formation_enabled(self, enabled: bool) -> None:
-        """Start (True) or stop (False, hold position) formation control for the whole team."""
+    def set_formation_enabled(self, enabled: bool, *, override: bool = False) -> object:
+        """Start (True) or stop (False, hold position) formation control for the whole team; override: start
+        although the pre-take-off checks refuse a vehicle (logged)."""

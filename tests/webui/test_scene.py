@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import viser
@@ -111,6 +113,32 @@ def test_label_shows_the_phase_of_a_mav_out_of_formation():
 
 def test_vehicle_card_shows_mode_solver_battery_and_a_stale_link():
     card = vehicle_card(vehicle(3, stale=True))
-    assert "mode offboard, armed, in air" in card
+    assert "autopilot offboard, armed, in air" in card
     assert "link 2.5 s **STALE**" in card and "solver 0.25 ms (solved)" in card and "battery 80 %" in card
     assert "STALE" not in vehicle_card(vehicle(3))
+
+
+def test_vehicle_card_shows_the_autopilots_own_mode_and_its_failsafe_with_its_reason():
+    v = dataclasses.replace(
+        vehicle(2),
+        autopilot_mode="LAND",
+        failsafe=True,
+        failsafe_reason="Failsafe activated: switching to Land",
+    )
+    card = vehicle_card(v)
+    assert "autopilot LAND" in card
+    assert "**FAILSAFE**: Failsafe activated: switching to Land" in card
+    assert "FAILSAFE" not in vehicle_card(vehicle(2))
+
+
+def test_vehicle_card_shows_why_the_autopilot_refused_to_arm_and_why_it_may_not_take_off_here():
+    v = dataclasses.replace(
+        vehicle(1, phase="takeoff"),
+        arming_refusal="Arming denied: Resolve system health failures first (Vehicle is in safety "
+        "configuration)",
+        takeoff_check="stands 3.0 m from the person, inside the 7.0 m keep-out (0.875 d_des)",
+    )
+    card = vehicle_card(v)
+    assert "**ARMING REFUSED**: Arming denied: Resolve system health failures first" in card
+    assert "safety configuration" in card
+    assert "**CANNOT TAKE OFF HERE**: stands 3.0 m from the person" in card
