@@ -136,15 +136,30 @@ class MpcParams:
 
 @dataclass(frozen=True, eq=False)
 class HalfPlanes:
-    """Soft linear constraints on the plan's horizontal positions, one per row r:
+    """Linear constraints on the plan's horizontal positions, one per row r:
     normals_xy[r] . x(steps[r])[:2] >= offsets[r], with steps (R,) int in 1..N+1, normals_xy (R, 2), offsets
     (R,) m. A generic hook for constraints built outside the MPC (e.g. separation half-planes); they enter
-    the QP as extra rows on the condensed inputs, softened by one shared slack with an exact penalty
-    (MpcParams.half_plane_weight), so the QP never becomes infeasible because of them. Exact solver only."""
+    the QP as extra rows on the condensed inputs (docs/fast-core.md#extra-constraints-half-planes).
+
+    soft: (R,) bool, None = every row soft. Soft rows share one slack w >= 0 with an exact penalty
+    (MpcParams.half_plane_weight): a^T x(n) + w >= b, so they never make the QP infeasible and hold exactly
+    whenever they all can. Hard rows have no slack: if they cannot hold the solve fails (ok=False, status
+    "infeasible") and the caller brakes or escapes."""
 
     steps: np.ndarray
     normals_xy: np.ndarray
     offsets: np.ndarray
+    soft: np.ndarray | None = None
+
+
+# The checked half-planes: steps (R,) int64, normals (R, 2), offsets (R,) m, soft (R,) 1.0 / 0.0.
+Planes = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _plane_violation(planes: Planes, positions: np.ndarray) -> float:
+    """Largest shortfall (m, >= 0) of the plan's positions (N+2, 3) from the half-planes."""
+    steps, normals, offsets, _ = planes
+    return max(0.0, float((offsets - np.einsum("ri,ri->r", normals, positions[steps, :2])).max()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -465,35 +480,42 @@ class ModelPredictiveController:
         hi[self._upper_rows] -= free
         return q, lo, hi
 
-    def _checked_half_planes(
-        self, half_planes: HalfPlanes | None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """(steps (R,) int, normals (R, 2), offsets (R,)) of the given half-planes, None when there are none;
-        ValueError for wrong shapes or steps, or for half-planes with the OSQP solver."""
+    def _checked_half_planes(self, half_planes: HalfPlanes | None) -> Planes | None:
+        """(steps (R,) int, normals (R, 2), offsets (R,), soft (R,) float 1/0) of the given half-planes, None
+        when there are none; ValueError for wrong shapes or steps."""
         if half_planes is None or len(half_planes.steps) == 0:
             return None
-        if not self._exact:
-            raise ValueError('half-planes need the exact solver (MpcParams(solver="exact"))')
         steps = np.asarray(half_planes.steps)
         count = steps.shape[0]
         normals = np.asarray(half_planes.normals_xy, dtype=float)
         offsets = np.asarray(half_planes.offsets, dtype=float)
-        if steps.ndim != 1 or normals.shape != (count, 2) or offsets.shape != (count,):
-            raise ValueError(f"half-planes: steps (R,), normals_xy (R, 2), offsets (R,); got {count} steps")
+        soft = np.ones(count, dtype=bool) if half_planes.soft is None else np.asarray(half_planes.soft)
+        if (
+            steps.ndim != 1
+            or normals.shape != (count, 2)
+            or offsets.shape != (count,)
+            or soft.shape != (count,)
+        ):
+            raise ValueError(
+                f"half-planes: steps (R,), normals_xy (R, 2), offsets (R,), soft (R,); got {count} steps"
+            )
         if not np.issubdtype(steps.dtype, np.integer) or steps.min() < 1 or steps.max() > self._n_steps:
             raise ValueError(f"half-plane steps must be integers in 1..{self._n_steps}")
-        return steps.astype(np.int64), normals, offsets
+        if soft.dtype != bool:
+            raise ValueError(f"half-plane soft must be an array of bool, got {soft.dtype}")
+        return steps.astype(np.int64), normals, offsets, soft.astype(float)
 
     def _half_plane_rows(
         self,
-        planes: tuple[np.ndarray, np.ndarray, np.ndarray],
+        planes: Planes,
         position: np.ndarray,
         velocity: np.ndarray,
         f: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The half-planes as extra rows of the exact QP: a^T G_xy(n) u + w >= b - a^T h_xy(n) (h the free
-        response), w the shared slack (last variable). Returns (rows (R, n), lower (R,), upper (R,))."""
-        steps, normals, offsets = planes
+        response), w the shared slack (last variable; a hard row has 0 there). Returns (rows (R, n), lower
+        (R,), upper (R,))."""
+        steps, normals, offsets, soft = planes
         x0 = np.concatenate([position, velocity])
         free = self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
         first = 6 * (steps - 1)  # the x row of step n in the stacked states; y is the next one
@@ -501,7 +523,7 @@ class ModelPredictiveController:
         rows[:, : self._nu] = (
             normals[:, :1] * self._input_to_state[first] + normals[:, 1:] * self._input_to_state[first + 1]
         )
-        rows[:, -1] = 1.0
+        rows[:, -1] = soft
         lower = offsets - (normals[:, 0] * free[first] + normals[:, 1] * free[first + 1])
         return rows, lower, np.full(len(steps), np.inf)
 
@@ -513,7 +535,7 @@ class ModelPredictiveController:
         target_position_m: np.ndarray,
         target_velocity_mps: np.ndarray,
         external_inputs_mps2: np.ndarray,
-        half_planes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        half_planes: Planes | None = None,
     ) -> MpcSolution | None:
         """The solve with ExactQp: arithmetic in compiled kernels (mpc_kernels.py); the closed form in one
         call. None when a number is not finite or implausible (the caller says which)."""
@@ -604,11 +626,7 @@ class ModelPredictiveController:
             )
         if not np.isfinite(violation):
             return self._failure("non_finite_plan", "the plan is not finite", iterations)
-        plane_violation = 0.0
-        if half_planes is not None:
-            steps, normals, offsets = half_planes
-            shortfall = offsets - np.einsum("ri,ri->r", normals, positions[steps, :2])
-            plane_violation = max(0.0, float(shortfall.max()))
+        plane_violation = 0.0 if half_planes is None else _plane_violation(half_planes, positions)
         for arr in (inputs, positions, velocities):
             arr.setflags(write=False)  # handed on (e.g. into a HorizonPlan) without a copy
         return MpcSolution(
@@ -625,6 +643,45 @@ class ModelPredictiveController:
             path=path,
         )
 
+    def _solve_osqp_with_half_planes(
+        self,
+        q: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        planes: Planes,
+        arrays: dict[str, np.ndarray],
+        w_terminal: np.ndarray,
+    ):
+        """OSQP on the QP with the half-planes' rows and their shared slack w (the exact solver's problem),
+        set up for this solve alone (its rows change every solve); the result's x and y are cut back to
+        the problem without them, so the caller treats it like the warm-started solver's result."""
+        prm = self._params
+        n = self._n_exact
+        p = np.zeros((n, n))
+        p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
+        p[-1, -1] = 2.0 * prm.half_plane_quadratic_weight
+        extra, extra_lo, extra_hi = self._half_plane_rows(
+            planes, arrays["position_m"], arrays["velocity_mps"], arrays["external_inputs_mps2"]
+        )
+        a = sp.vstack([self._a_exact, extra], format="csc")
+        solver = osqp.OSQP()
+        solver.setup(
+            sp.csc_matrix(np.triu(p)),
+            np.append(q, prm.half_plane_weight),
+            a,
+            np.concatenate([lo, [0.0], extra_lo]),
+            np.concatenate([hi, [np.inf], extra_hi]),
+            eps_abs=prm.eps_abs,
+            eps_rel=prm.eps_rel,
+            max_iter=prm.max_iterations,
+            polishing=prm.polishing,
+            adaptive_rho=True,
+            adaptive_rho_interval=25,
+            check_termination=5,
+            verbose=False,
+        )
+        return solver.solve(raise_error=False)
+
     def _failure(self, status: str, message: str, iterations: int = 0, time_s: float = 0.0) -> MpcSolution:
         n = self._n_steps
         return MpcSolution(
@@ -637,6 +694,7 @@ class ModelPredictiveController:
             max_state_violation=float("nan"),
             iterations=iterations,
             solve_time_s=time_s,
+            path="active_set" if self._exact else "osqp",
         )
 
     def solve(
@@ -654,8 +712,9 @@ class ModelPredictiveController:
         """Plan u(0..N) from x(0) = (position_m, velocity_mps), (3,) each, to the terminal reference
         (target_position_m, target_velocity_mps), (3,) each, under the external inputs f(0..N), (N+1, 3).
 
-        half_planes: soft constraints on the plan's horizontal positions (`HalfPlanes`; exact solver only:
-        with OSQP they raise ValueError). Steps outside 1..N+1 or wrong shapes raise ValueError.
+        half_planes: linear constraints on the plan's horizontal positions (`HalfPlanes`), soft or hard; both
+        solvers take them (OSQP sets up a one-off problem with the extra rows, without warm start). Steps
+        outside 1..N+1 or wrong shapes raise ValueError.
 
         terminal_*_weight: (3, 3) symmetric PSD W_p / W_v for this solve; None = the params' scalar * I3.
         Wrong shapes raise ValueError (a programming error). Non-finite or implausibly large numbers, or an
@@ -724,12 +783,15 @@ class ModelPredictiveController:
         reference = np.concatenate([arrays["target_position_m"], arrays["target_velocity_mps"]])
         f = arrays["external_inputs_mps2"]
         q, lo, hi = self._solve_vectors(x0, reference, f)
-        self._solver.update(q=q, l=lo, u=hi)
-        if self._warm is not None:
-            z_prev, y_prev, plan_prev = self._warm
-            z_shift, y_shift = self._shifts[self._elapsed_steps(plan_prev, x0)]
-            self._solver.warm_start(x=z_prev[z_shift], y=y_prev[y_shift])
-        result = self._solver.solve(raise_error=False)
+        if planes is not None:
+            result = self._solve_osqp_with_half_planes(q, lo, hi, planes, arrays, w_terminal)
+        else:
+            self._solver.update(q=q, l=lo, u=hi)
+            if self._warm is not None:
+                z_prev, y_prev, plan_prev = self._warm
+                z_shift, y_shift = self._shifts[self._elapsed_steps(plan_prev, x0)]
+                self._solver.warm_start(x=z_prev[z_shift], y=y_prev[y_shift])
+            result = self._solver.solve(raise_error=False)
         info = result.info
         status, iterations, run_time = str(info.status), int(info.iter), float(info.run_time)
         accepted = ACCEPTED_STATUSES if prm.accept_inaccurate else ACCEPTED_STATUSES[:1]
@@ -753,7 +815,11 @@ class ModelPredictiveController:
         if not (np.all(np.isfinite(plan)) and np.isfinite(violation)):
             self._warm = None
             return self._failure("non_finite_plan", "the plan is not finite", iterations, run_time)
-        self._warm = (np.array(result.x), np.array(result.y), plan)
+        plane_violation = 0.0
+        if planes is None:
+            self._warm = (np.array(result.x), np.array(result.y), plan)
+        else:
+            plane_violation = _plane_violation(planes, positions)
         violation = violation if violation > prm.violation_tolerance else 0.0
         return MpcSolution(
             ok=True,
@@ -765,4 +831,5 @@ class ModelPredictiveController:
             max_state_violation=violation,
             iterations=iterations,
             solve_time_s=run_time,
+            half_plane_violation_m=plane_violation if plane_violation > prm.violation_tolerance else 0.0,
         )

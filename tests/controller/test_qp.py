@@ -320,9 +320,11 @@ def _cut(rng: np.random.Generator, plan_positions: np.ndarray, count: int, depth
 @pytest.fixture(scope="module")
 def half_plane_results():
     """30 flight-like instances, each with 1-4 half-planes its free plan violates by 0.05-0.3 m, solved in
-    sequence by one exact controller, and by CVXPY + OSQP with the same soft constraints."""
+    sequence by one exact controller, by the MPC's own OSQP set-up at tight tolerances, and by CVXPY + OSQP
+    with the same soft constraints written out independently."""
     rng = np.random.default_rng(515)
     controller = ModelPredictiveController(MpcParams())
+    reference = ModelPredictiveController(REFERENCE)
     out = []
     for _ in range(30):
         case = flight_case(rng)
@@ -333,24 +335,35 @@ def half_plane_results():
                 controller.solve(**case, half_planes=planes),
                 cvxpy_mpc_reference(MpcParams(), _with_weights(case), planes),
                 planes,
+                reference.solve(**case, half_planes=planes),
             )
         )
     return out
 
 
 def test_half_planes_match_cvxpy(half_plane_results):
-    assert all(ours.ok for ours, _, _ in half_plane_results)
-    assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, cvx, _ in half_plane_results) < TOL
+    assert all(ours.ok for ours, _, _, _ in half_plane_results)
+    assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, cvx, _, _ in half_plane_results) < TOL
+
+
+def test_half_planes_match_osqp(half_plane_results):
+    assert all(ref.ok for _, _, _, ref in half_plane_results)
+    assert (
+        max(np.max(np.abs(ours.inputs_mps2 - ref.inputs_mps2)) for ours, _, _, ref in half_plane_results)
+        < TOL
+    )
+    for ours, _, _, ref in half_plane_results:
+        assert ours.half_plane_violation_m == pytest.approx(ref.half_plane_violation_m, abs=1e-6)
 
 
 def test_half_planes_that_can_hold_are_held(half_plane_results):
     """A single late cut of at most 0.3 m into a free plan can be met within the input box: no violation is
     left. (Several cuts in different directions at nearby steps may contradict each other; those are only
     compared with CVXPY.) Every solve needed the active-set solver: the closed form violated the cuts."""
-    single = [ours for ours, _, planes in half_plane_results if len(planes.steps) == 1]
+    single = [ours for ours, _, planes, _ in half_plane_results if len(planes.steps) == 1]
     assert len(single) >= 5
     assert all(ours.half_plane_violation_m == 0.0 for ours in single)
-    assert all(ours.path == "active_set" for ours, _, _ in half_plane_results)
+    assert all(ours.path == "active_set" for ours, _, _, _ in half_plane_results)
 
 
 def test_contradictory_half_planes_give_way_without_failing():
@@ -375,12 +388,65 @@ def test_no_half_planes_leave_the_solution_unchanged():
     )
 
 
-def test_half_planes_need_the_exact_solver():
-    planes = HalfPlanes(steps=np.array([3]), normals_xy=np.array([[1.0, 0.0]]), offsets=np.array([0.0]))
-    with pytest.raises(ValueError, match="exact solver"):
-        ModelPredictiveController(MpcParams(solver="osqp")).solve(
-            **flight_case(np.random.default_rng(5)), half_planes=planes
-        )
+def _separation_planes(plan_positions: np.ndarray, angle: float, soft: bool) -> HalfPlanes:
+    """Planes shaped like separation constraints: one on every step 1..N+1 (a teammate's buffered cell,
+    normal (cos, sin) of angle) that the free plan's step 8 crosses by 0.2 m, and one on steps 10..N+1 (a
+    trunk's tangent, turned by 1 rad) that its last step crosses by 0.1 m; all soft or all hard."""
+    steps = np.arange(1, len(plan_positions))
+    late = steps[steps >= 10]
+    cell = np.array([np.cos(angle), np.sin(angle)])
+    trunk = np.array([np.cos(angle + 1.0), np.sin(angle + 1.0)])
+    return HalfPlanes(
+        steps=np.concatenate([steps, late]),
+        normals_xy=np.vstack([np.tile(cell, (len(steps), 1)), np.tile(trunk, (len(late), 1))]),
+        offsets=np.concatenate(
+            [
+                np.full(len(steps), cell @ plan_positions[8, :2] + 0.2),
+                np.full(len(late), trunk @ plan_positions[-1, :2] + 0.1),
+            ]
+        ),
+        soft=np.full(len(steps) + len(late), soft),
+    )
+
+
+@pytest.mark.parametrize("soft", [True, False])
+def test_separation_planes_on_every_step_match_osqp(soft):
+    """20 flight-like instances whose free plan crosses a plane held on every step and a second one on the
+    late steps (the shape of separation constraints: teammates' cells, trunks), hard or soft: the exact
+    solver's inputs equal tight OSQP's on the same problem to 1e-6, and the planes hold wherever OSQP says
+    they can."""
+    rng = np.random.default_rng(77 + soft)
+    exact, reference = ModelPredictiveController(MpcParams()), ModelPredictiveController(REFERENCE)
+    for _ in range(20):
+        case = flight_case(rng)
+        planes = _separation_planes(exact.solve(**case).positions_m, rng.uniform(0.0, 2 * np.pi), soft)
+        ours, ref = exact.solve(**case, half_planes=planes), reference.solve(**case, half_planes=planes)
+        assert ours.ok == ref.ok
+        if ours.ok:
+            assert ours.path != "closed_form"
+            np.testing.assert_allclose(ours.inputs_mps2, ref.inputs_mps2, rtol=0, atol=TOL)
+            assert ours.half_plane_violation_m == pytest.approx(ref.half_plane_violation_m, abs=1e-6)
+
+
+def test_hard_half_planes_that_cannot_hold_fail_the_solve():
+    """Hard rows have no slack: contradictory ones make the QP infeasible, reported as such (the caller
+    brakes or escapes); with one of them soft, that one gives way."""
+    case = flight_case(np.random.default_rng(3))
+    controller = ModelPredictiveController(MpcParams())
+    x = controller.solve(**case).positions_m[5, 0]
+    planes = HalfPlanes(
+        steps=np.array([5, 5]),
+        normals_xy=np.array([[1.0, 0.0], [-1.0, 0.0]]),
+        offsets=np.array([x + 0.1, -x + 0.1]),  # 0.2 m apart; each alone can hold
+        soft=np.array([True, False]),
+    )
+    mixed = controller.solve(**case, half_planes=planes)
+    assert mixed.ok and mixed.half_plane_violation_m == pytest.approx(0.2, abs=1e-3)
+    assert mixed.positions_m[5, 0] == pytest.approx(x - 0.1, abs=1e-6)  # the hard row holds exactly
+    hard = HalfPlanes(planes.steps, planes.normals_xy, planes.offsets, soft=np.array([False, False]))
+    sol = controller.solve(**case, half_planes=hard)
+    assert not sol.ok and sol.status == "infeasible"
+    assert controller.solve(**case).ok  # and the next solve without them is unaffected
 
 
 def test_half_plane_step_outside_the_horizon_raises():
