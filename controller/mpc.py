@@ -136,10 +136,11 @@ class MpcParams:
 
 @dataclass(frozen=True, eq=False)
 class HalfPlanes:
-    """Linear constraints on the plan's horizontal positions, one per row r:
-    normals_xy[r] . x(steps[r])[:2] >= offsets[r], with steps (R,) int in 1..N+1, normals_xy (R, 2), offsets
-    (R,) m. A generic hook for constraints built outside the MPC (e.g. separation half-planes); they enter
-    the QP as extra rows on the condensed inputs (docs/fast-core.md#extra-constraints-half-planes).
+    """Linear constraints on the plan's positions, one per row r:
+    normals_xy[r] . p(steps[r])[:2] + normals_z[r] * p(steps[r])[2] >= offsets[r], with steps (R,) int in
+    1..N+1, normals_xy (R, 2), normals_z (R,) or None (= 0: a vertical plane, the usual case), offsets (R,) m.
+    A generic hook for constraints built outside the MPC (e.g. separation half-planes); they enter the QP as
+    extra rows on the condensed inputs (docs/fast-core.md#extra-constraints-half-planes).
 
     soft: (R,) bool, None = every row soft. Soft rows share one slack w >= 0 with an exact penalty
     (MpcParams.half_plane_weight): a^T x(n) + w >= b, so they never make the QP infeasible and hold exactly
@@ -150,16 +151,17 @@ class HalfPlanes:
     normals_xy: np.ndarray
     offsets: np.ndarray
     soft: np.ndarray | None = None
+    normals_z: np.ndarray | None = None
 
 
-# The checked half-planes: steps (R,) int64, normals (R, 2), offsets (R,) m, soft (R,) 1.0 / 0.0.
+# The checked half-planes: steps (R,) int64, normals (R, 3), offsets (R,) m, soft (R,) 1.0 / 0.0.
 Planes = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def _plane_violation(planes: Planes, positions: np.ndarray) -> float:
     """Largest shortfall (m, >= 0) of the plan's positions (N+2, 3) from the half-planes."""
     steps, normals, offsets, _ = planes
-    return max(0.0, float((offsets - np.einsum("ri,ri->r", normals, positions[steps, :2])).max()))
+    return max(0.0, float((offsets - np.einsum("ri,ri->r", normals, positions[steps])).max()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -481,7 +483,7 @@ class ModelPredictiveController:
         return q, lo, hi
 
     def _checked_half_planes(self, half_planes: HalfPlanes | None) -> Planes | None:
-        """(steps (R,) int, normals (R, 2), offsets (R,), soft (R,) float 1/0) of the given half-planes, None
+        """(steps (R,) int, normals (R, 3), offsets (R,), soft (R,) float 1/0) of the given half-planes, None
         when there are none; ValueError for wrong shapes or steps."""
         if half_planes is None or len(half_planes.steps) == 0:
             return None
@@ -490,20 +492,25 @@ class ModelPredictiveController:
         normals = np.asarray(half_planes.normals_xy, dtype=float)
         offsets = np.asarray(half_planes.offsets, dtype=float)
         soft = np.ones(count, dtype=bool) if half_planes.soft is None else np.asarray(half_planes.soft)
+        normals_z = (
+            np.zeros(count) if half_planes.normals_z is None else np.asarray(half_planes.normals_z, float)
+        )
         if (
             steps.ndim != 1
             or normals.shape != (count, 2)
             or offsets.shape != (count,)
             or soft.shape != (count,)
+            or normals_z.shape != (count,)
         ):
             raise ValueError(
-                f"half-planes: steps (R,), normals_xy (R, 2), offsets (R,), soft (R,); got {count} steps"
+                "half-planes: steps (R,), normals_xy (R, 2), offsets (R,), soft (R,), normals_z (R,); "
+                f"got {count} steps"
             )
         if not np.issubdtype(steps.dtype, np.integer) or steps.min() < 1 or steps.max() > self._n_steps:
             raise ValueError(f"half-plane steps must be integers in 1..{self._n_steps}")
         if soft.dtype != bool:
             raise ValueError(f"half-plane soft must be an array of bool, got {soft.dtype}")
-        return steps.astype(np.int64), normals, offsets, soft.astype(float)
+        return steps.astype(np.int64), np.column_stack([normals, normals_z]), offsets, soft.astype(float)
 
     def _half_plane_rows(
         self,
@@ -512,19 +519,23 @@ class ModelPredictiveController:
         velocity: np.ndarray,
         f: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The half-planes as extra rows of the exact QP: a^T G_xy(n) u + w >= b - a^T h_xy(n) (h the free
-        response), w the shared slack (last variable; a hard row has 0 there). Returns (rows (R, n), lower
-        (R,), upper (R,))."""
+        """The half-planes as extra rows of the exact QP: a^T G_p(n) u + w >= b - a^T h_p(n), with G_p(n) the
+        position rows of the input-to-state map at step n, h the free response, w the shared slack (last
+        variable; a hard row has 0 there). Returns (rows (R, n), lower (R,), upper (R,))."""
         steps, normals, offsets, soft = planes
         x0 = np.concatenate([position, velocity])
         free = self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
-        first = 6 * (steps - 1)  # the x row of step n in the stacked states; y is the next one
+        first = 6 * (steps - 1)  # the x row of step n in the stacked states; y, z are the next two
         rows = np.zeros((len(steps), self._n_exact))
         rows[:, : self._nu] = (
-            normals[:, :1] * self._input_to_state[first] + normals[:, 1:] * self._input_to_state[first + 1]
+            normals[:, 0:1] * self._input_to_state[first]
+            + normals[:, 1:2] * self._input_to_state[first + 1]
+            + normals[:, 2:3] * self._input_to_state[first + 2]
         )
         rows[:, -1] = soft
-        lower = offsets - (normals[:, 0] * free[first] + normals[:, 1] * free[first + 1])
+        lower = offsets - (
+            normals[:, 0] * free[first] + normals[:, 1] * free[first + 1] + normals[:, 2] * free[first + 2]
+        )
         return rows, lower, np.full(len(steps), np.inf)
 
     def _solve_exact(
