@@ -15,6 +15,8 @@ from controller.fields_kernel import TERMS, external_inputs_compiled
 from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
 
+pytestmark = pytest.mark.slow  # four simulated flights record the instances: about 20 s of CPU
+
 FLIGHTS = (
     SimConfig(vehicles=8, duration_s=16.0, warmup_s=15.0, rate_hz=10.0, start="cluster", seed=3),
     SimConfig(

@@ -268,15 +268,18 @@ def mpc_results():
     return out
 
 
+@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_inputs_match_osqp(mpc_results):
     assert all(ours.ok and ref.ok for ours, ref, _ in mpc_results)
     assert max(np.max(np.abs(ours.inputs_mps2 - ref.inputs_mps2)) for ours, ref, _ in mpc_results) < TOL
 
 
+@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_inputs_match_cvxpy(mpc_results):
     assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, _, cvx in mpc_results) < TOL
 
 
+@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_plan_matches_cvxpy(mpc_results):
     errors = [
         max(np.max(np.abs(ours.positions_m - cvx[1])), np.max(np.abs(ours.velocities_mps - cvx[2])))
@@ -285,6 +288,7 @@ def test_mpc_exact_plan_matches_cvxpy(mpc_results):
     assert max(errors) < TOL
 
 
+@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_instances_are_mostly_constrained(mpc_results):
     """At least half of the 200 need the active-set solver (a bound or a saturated input is active); the
     flight-like ones mostly do not."""
@@ -293,6 +297,7 @@ def test_mpc_instances_are_mostly_constrained(mpc_results):
     assert len(paths) - paths.count("closed_form") >= MPC_CASES // 2
 
 
+@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_reports_the_same_violation_as_osqp(mpc_results):
     for ours, ref, _ in mpc_results:
         assert ours.max_state_violation == pytest.approx(ref.max_state_violation, abs=1e-6)
