@@ -618,7 +618,9 @@ class ModelPredictiveController:
             result = qp.finish(q, lo, hi, fixed_rows_ok, z, rows, gradient, *extra)
             if not result.ok:
                 message = f"exact QP: {result.status} ({result.message})"
-                return self._failure(result.status, message, result.iterations, result.solve_time_s)
+                return self._failure(
+                    result.status, message, result.iterations, result.solve_time_s, path=result.path
+                )
             path, iterations, time_s = result.path, result.iterations, result.solve_time_s
             violation = rollout(
                 position_m,
@@ -693,7 +695,9 @@ class ModelPredictiveController:
         )
         return solver.solve(raise_error=False)
 
-    def _failure(self, status: str, message: str, iterations: int = 0, time_s: float = 0.0) -> MpcSolution:
+    def _failure(
+        self, status: str, message: str, iterations: int = 0, time_s: float = 0.0, path: str = "osqp"
+    ) -> MpcSolution:
         n = self._n_steps
         return MpcSolution(
             ok=False,
@@ -705,7 +709,7 @@ class ModelPredictiveController:
             max_state_violation=float("nan"),
             iterations=iterations,
             solve_time_s=time_s,
-            path="active_set" if self._exact else "osqp",
+            path=path,
         )
 
     def solve(
