@@ -44,9 +44,10 @@ class VehicleView:
     position_m (3,) and yaw_rad (ENU) as reported by its autopilot; plan_positions_m (M, 3) its latest
     horizon plan (M = 0 when none); phase: the mission's phase name (e.g. "formation", "landing", "landed");
     mode: the autopilot flight mode name; link_age_s: seconds since its last telemetry (stale when
-    `link_stale`); solver_time_s: OSQP's time of the last solve (None before the first); battery_fraction in
-    [0, 1] or None when unknown; in_formation: flown by formation control in the roster now; agent: its
-    onboard agent's link (None when the agent runs in the station).
+    `link_stale`); solver_time_s: the MPC solver's own time of the last solve (0 when the closed form solved
+    it; None before the first); battery_fraction in [0, 1] or None when unknown; in_formation: flown by
+    formation control in the roster now; agent: its onboard agent's link (None when the agent runs in the
+    station).
 
     What the autopilot itself says (the truth when it differs from skyring's reading): autopilot_mode: its own
     mode name (PX4: "OFFBOARD", "LAND", "HOLD", "RETURN_TO_LAUNCH", ...; "" when the back-end has none);
