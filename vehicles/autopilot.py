@@ -39,7 +39,9 @@ class AutopilotState:
     link_lost: no telemetry for longer than the back-end's limit (PX4: 1 s); the other fields are the last
     known values and stamp_s says how old they are. released: a pilot or the autopilot's own failsafe took the
     vehicle out of offboard; skyring does not fight for control and ignores set-points until re-engaged
-    (takeoff).
+    (takeoff). failsafe: the autopilot's own failsafe action in progress, in words ("" when none: e.g.
+    "battery 14 % at or below 15 %: landing"); arming_refused: why it refused the last request to arm ("" when
+    it did not, or once it armed).
     """
 
     vehicle_id: int
@@ -57,6 +59,8 @@ class AutopilotState:
     position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
     link_lost: bool = False
     released: bool = False
+    failsafe: str = ""
+    arming_refused: str = ""
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))

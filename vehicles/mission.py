@@ -7,9 +7,12 @@ machine per vehicle:
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
+    TAKEOFF, FORMATION --hold()--> HOLDING --release()--> FORMATION;  HOLDING --land()--> LANDING
+    TAKEOFF, FORMATION, HOLDING --(the autopilot lands by itself: a failsafe or a pilot)--> LANDING
 
-A MAV that is landing or landed has left formation control: it publishes plans marked not-in-formation (then
-none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. Operator
+A MAV that is holding, landing or landed has left formation control: it publishes plans marked
+not-in-formation (then none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by
+themselves. Operator
 actions are methods that take effect at the next `step` (within one control period); a refused action raises
 `MissionError` with a message a person can act on and changes nothing.
 """
@@ -38,6 +41,7 @@ class Phase(StrEnum):
     IDLE = "idle"
     TAKEOFF = "takeoff"
     FORMATION = "formation"
+    HOLDING = "holding"  # hovering where the operator stopped it, out of formation control
     LANDING = "landing"
     LANDED = "landed"
 
@@ -238,16 +242,37 @@ class Mission:
         self._start_landing(v)
 
     def land_all(self) -> None:
-        """Land every vehicle that is taking off or flying."""
+        """Land every vehicle that is taking off, flying or holding."""
         for v in self._vehicles.values():
-            if v.phase in (Phase.TAKEOFF, Phase.FORMATION):
+            if v.phase in (Phase.TAKEOFF, Phase.FORMATION, Phase.HOLDING):
                 self._start_landing(v)
 
-    def release(self, vehicle_id: int) -> None:
-        """Give a landed vehicle back to the formation: it takes off again (when formation is enabled)."""
+    def hold(self, vehicle_id: int) -> None:
+        """Stop one flying vehicle where it is: it hovers out of formation control (its teammates avoid it
+        and re-space without it) until released or landed."""
         v = self._vehicle(vehicle_id)
+        if v.phase not in (Phase.TAKEOFF, Phase.FORMATION):
+            self._refuse(
+                f"vehicle {vehicle_id} is {v.phase.value}; only a vehicle taking off or flying formation "
+                "can be held"
+            )
+        if v.state is None or not v.state.in_air:
+            self._refuse(f"vehicle {vehicle_id} is not in the air yet; land it instead to stop its takeoff")
+        v.phase = Phase.HOLDING
+        v.command_s = self._now
+        v.autopilot.hold()
+
+    def release(self, vehicle_id: int) -> None:
+        """Give a vehicle back to the formation: a landed one takes off again (when formation is enabled), a
+        holding one rejoins from where it hovers."""
+        v = self._vehicle(vehicle_id)
+        if v.phase == Phase.HOLDING:
+            v.phase = Phase.FORMATION
+            return
         if v.phase != Phase.LANDED:
-            self._refuse(f"vehicle {vehicle_id} is {v.phase.value}; only a landed vehicle can be released")
+            self._refuse(
+                f"vehicle {vehicle_id} is {v.phase.value}; only a landed or holding vehicle can be released"
+            )
         v.phase = Phase.IDLE
 
     def set_formation_enabled(self, enabled: bool) -> None:
@@ -390,7 +415,11 @@ class Mission:
         if s is None:
             return
         retry = now_s - v.command_s >= self._params.retry_s
-        if v.phase == Phase.IDLE and self._enabled and not s.in_air:
+        flying = v.phase in (Phase.TAKEOFF, Phase.FORMATION, Phase.HOLDING)
+        if flying and s.in_air and s.released and s.mode == FlightMode.LAND:
+            v.phase = Phase.LANDING  # the autopilot's failsafe (or a pilot) is landing it
+            v.command_s = now_s
+        elif v.phase == Phase.IDLE and self._enabled and not s.in_air:
             v.phase = Phase.TAKEOFF
             v.command_s = now_s
             v.autopilot.takeoff(self.takeoff_height_m())
@@ -413,6 +442,12 @@ class Mission:
                 v.autopilot.hold()
             elif self._enabled:
                 v.paused = False
+        elif v.phase == Phase.HOLDING:
+            if not s.in_air and not s.armed:
+                v.phase = Phase.LANDED
+            elif retry and s.mode not in (FlightMode.HOLD, FlightMode.MANUAL) and not s.released:
+                v.command_s = now_s
+                v.autopilot.hold()
         elif v.phase == Phase.LANDING:
             if not s.in_air:
                 v.phase = Phase.LANDED
@@ -425,6 +460,6 @@ class Mission:
         if v.phase == Phase.FORMATION and self._enabled and not released:
             return AgentRole.FORMATION
         airborne = v.state is not None and v.state.in_air
-        if airborne and v.phase in (Phase.TAKEOFF, Phase.FORMATION, Phase.LANDING):
+        if airborne and v.phase in (Phase.TAKEOFF, Phase.FORMATION, Phase.HOLDING, Phase.LANDING):
             return AgentRole.AIRBORNE
         return AgentRole.GROUND

@@ -3,8 +3,10 @@ operator page beside them in one asyncio loop.
 
 `LiveRunner` advances the station `speed` simulated seconds per wall second in batches short enough that the
 API and the WebSocket stay responsive; when the CPU cannot keep up it re-anchors instead of spiralling and
-counts it. `serve_station` runs viser, uvicorn and the runner until stopped (SIGINT/SIGTERM or an event),
-then lands every MAV and closes the back-ends in a `finally`, whatever stopped it.
+counts it; `LiveRunner.pace` tells the station how it keeps up (the real-time factor over the last
+`PACE_WINDOW_S` of wall time), for the operator's header and the "behind real time" alert. `serve_station`
+runs viser, uvicorn and the runner until stopped (SIGINT/SIGTERM or an event), then lands every MAV and
+closes the back-ends in a `finally`, whatever stopped it.
 """
 
 from __future__ import annotations
@@ -17,13 +19,18 @@ import signal
 import socket
 import threading
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Protocol
 
 import uvicorn
 
+from webui.view import PaceView
+
 log = logging.getLogger(__name__)
+
+PACE_WINDOW_S = 1.0  # wall seconds the reported real-time factor is measured over
 
 
 class Steppable(Protocol):
@@ -81,6 +88,22 @@ class LiveRunner:
         self._clock = clock
         self._sleep = sleep
         self.stats = PaceStats()
+        self._window: deque[tuple[float, float]] = deque()  # (wall, simulated) seconds, last PACE_WINDOW_S
+
+    def pace(self) -> PaceView:
+        """The requested speed, the real-time factor achieved over the last PACE_WINDOW_S of wall time (None
+        until half a window has passed) and the times the loop fell behind so far."""
+        factor = None
+        if len(self._window) >= 2:
+            (w0, s0), (w1, s1) = self._window[0], self._window[-1]
+            if w1 - w0 >= 0.5 * PACE_WINDOW_S:
+                factor = (s1 - s0) / (w1 - w0)
+        return PaceView(requested_speed=self._speed, realtime_factor=factor, fell_behind=self.stats.lagged)
+
+    def _measure(self, wall: float) -> None:
+        self._window.append((wall, self._station.time_s))
+        while len(self._window) > 2 and wall - self._window[1][0] >= PACE_WINDOW_S:
+            self._window.popleft()
 
     async def run(self, stop: asyncio.Event) -> None:
         """Tick until `stop` is set."""
@@ -101,11 +124,16 @@ class LiveRunner:
             now = self._clock()
             if now - start_wall > 0:
                 self.stats.achieved_speed = (self._station.time_s - start_sim) / (now - start_wall)
+            self._measure(now)
             if now >= next_frame:
                 self._frame()
                 next_frame = now + self._frame_period_s
             next_tick = wall0 + (self._station.time_s + period - sim0) / self._speed
             await self._sleep(max(0.0, min(next_tick, next_frame) - self._clock()))
+
+    def on_frame(self, callback: Callable[[], None]) -> None:
+        """Call `callback` every frame_period_s of wall time (replacing the one given at construction)."""
+        self._on_frame = callback
 
     def _tick(self) -> None:
         try:
@@ -123,6 +151,12 @@ class LiveRunner:
             self._on_frame()
         except Exception:  # noqa: BLE001 - a drawing problem must not stop the MAVs' control
             log.exception("publishing a frame failed")
+
+
+def _publish(station, runner: LiveRunner, ui) -> None:
+    """One frame: tell the station how the loop keeps up, then draw its view."""
+    station.set_pace(runner.pace())
+    ui.publish(station.scene_view())
 
 
 def bind_port(host: str, port: int) -> tuple[socket.socket, bool]:
@@ -226,8 +260,8 @@ async def serve_station(
             station=station,
             speed=speed,
             frame_period_s=frame_period_s,
-            on_frame=lambda: ui.publish(station.scene_view()),
         )
+        runner.on_frame(lambda: _publish(station, runner, ui))
         runner_task = asyncio.create_task(runner.run(stop))
         stop_task = asyncio.create_task(stop.wait())
         await asyncio.wait({runner_task, serve_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)

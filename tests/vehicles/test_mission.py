@@ -116,7 +116,7 @@ def test_changing_d_des_moves_the_team_to_the_new_distance():
     ("action", "match"),
     [
         (lambda m: m.land(99), "no vehicle with id 99"),
-        (lambda m: m.release(1), "only a landed vehicle"),
+        (lambda m: m.release(1), "only a landed or holding vehicle"),
         (lambda m: m.remove_obstacle("tree-1"), "static obstacle"),
         (lambda m: m.remove_obstacle("nope"), "no virtual obstacle"),
         (

@@ -1,0 +1,103 @@
+"""The Alerts tab: every alert of the run in a table (most urgent first), a button to acknowledge each one
+that is active and not yet acknowledged, and one for all. A newly raised (or re-raised, or worsened) alert is
+also announced to every open page as a notification; the list is what persists.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import AbstractContextManager
+from typing import Any
+
+import viser
+
+from webui.cards import alert_table_html
+from webui.view import SEVERITY_RANK, Alert, OperatorActions, Severity
+
+Run = Callable[[viser.ClientHandle | None, Callable[[], object], str | None], bool]
+Announce = Callable[[str, str, str], None]  # (title, body, colour) to every page
+
+ACK_BUTTONS = 8  # at most this many per-alert buttons; "Acknowledge all" covers the rest
+NOTIFY_PER_REFRESH = 3
+NOTIFY_COLORS = {Severity.INFO: "blue", Severity.WARNING: "orange", Severity.CRITICAL: "red"}
+
+
+def ack_label(alert: Alert, width: int = 48) -> str:
+    """The label of an alert's acknowledge button: its id and the start of its message."""
+    text = f"Acknowledge {alert.alert_id}: {alert.message}"
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+class AlertsPanel:
+    """Built inside `container` (a tab or folder handle, re-entered to add buttons later); `refresh` shows a
+    new alert list."""
+
+    def __init__(
+        self,
+        gui: viser.GuiApi,
+        container: AbstractContextManager[Any],
+        actions: OperatorActions,
+        *,
+        run: Run,
+        announce: Announce | None = None,
+    ) -> None:
+        self._gui = gui
+        self._container = container
+        self._actions = actions
+        self._run = run
+        self._announce = announce
+        self._seen: dict[str, tuple[int, int]] = {}  # alert id -> (count, severity rank) announced
+        with container:
+            self.ack_all = gui.add_button("Acknowledge all", icon=viser.Icon.CHECKS, order=1.0)
+            self.table = gui.add_html(alert_table_html(()), order=100.0)
+        self.ack_all.on_click(
+            lambda e: self._run(e.client, self._actions.acknowledge_all_alerts, "Every alert acknowledged")
+        )
+        self.buttons: dict[str, viser.GuiButtonHandle] = {}
+
+    def refresh(self, alerts: tuple[Alert, ...]) -> None:
+        table = alert_table_html(alerts)
+        if self.table.content != table:
+            self.table.content = table
+        self._refresh_buttons(alerts)
+        self._announce_new(alerts)
+
+    def _refresh_buttons(self, alerts: tuple[Alert, ...]) -> None:
+        pending = [a for a in alerts if a.active and not a.acknowledged][:ACK_BUTTONS]
+        wanted = {a.alert_id: a for a in pending}
+        for alert_id in [i for i in self.buttons if i not in wanted]:
+            self.buttons.pop(alert_id).remove()
+        for rank, alert in enumerate(pending):
+            button = self.buttons.get(alert.alert_id)
+            label = ack_label(alert)
+            if button is None:
+                button = self._add_button(alert, label, order=2.0 + rank * 0.01)
+                self.buttons[alert.alert_id] = button
+            elif button.label != label:
+                button.label = label
+
+    def _add_button(self, alert: Alert, label: str, *, order: float) -> viser.GuiButtonHandle:
+        with self._container:
+            button = self._gui.add_button(
+                label, color="orange" if alert.severity != Severity.CRITICAL else "red", order=order
+            )
+        alert_id = alert.alert_id
+        button.on_click(
+            lambda e: self._run(
+                e.client, lambda: self._actions.acknowledge_alert(alert_id), f"Alert {alert_id} acknowledged"
+            )
+        )
+        return button
+
+    def _announce_new(self, alerts: tuple[Alert, ...]) -> None:
+        fresh = []
+        for a in alerts:
+            seen = self._seen.get(a.alert_id)
+            now = (a.count, SEVERITY_RANK[a.severity])
+            if a.active and (seen is None or now > seen) and a.severity != Severity.INFO:
+                fresh.append(a)
+            self._seen[a.alert_id] = now
+        if self._announce is None:
+            return
+        for a in fresh[:NOTIFY_PER_REFRESH]:
+            self._announce(f"{a.severity.value.upper()} ({a.alert_id})", a.message, NOTIFY_COLORS[a.severity])
