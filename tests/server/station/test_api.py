@@ -375,7 +375,10 @@ async def test_release_returns_a_landed_mav_to_the_formation(flying):
 
 async def test_releasing_a_flying_mav_is_refused_and_changes_nothing(flying):
     await assert_refused(
-        client_for(flying), "POST", "/api/vehicles/1/release", match="only a landed or holding vehicle can be released"
+        client_for(flying),
+        "POST",
+        "/api/vehicles/1/release",
+        match="only a landed or holding vehicle can be released",
     )
 
 
