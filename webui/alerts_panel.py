@@ -1,6 +1,8 @@
 """The Alerts tab: every alert of the run in a table (most urgent first), a button to acknowledge each one
-that is active and not yet acknowledged, and one for all. A newly raised (or re-raised, or worsened) alert is
-also announced to every open page as a notification; the list is what persists.
+not yet acknowledged (active or already cleared: a brief critical condition still wants to be seen), and
+one for all. A newly raised (or re-raised, or worsened) critical
+alert is also announced to every open page as a notification (warnings only show in the list and the
+Mission window's summary, so that toasts do not pile up over the 3-D view); the list is what persists.
 """
 
 from __future__ import annotations
@@ -22,10 +24,13 @@ NOTIFY_PER_REFRESH = 3
 NOTIFY_COLORS = {Severity.INFO: "blue", Severity.WARNING: "orange", Severity.CRITICAL: "red"}
 
 
-def ack_label(alert: Alert, width: int = 48) -> str:
-    """The label of an alert's acknowledge button: its id and the start of its message."""
-    text = f"Acknowledge {alert.alert_id}: {alert.message}"
-    return text if len(text) <= width else text[: width - 3] + "..."
+def ack_label(alert: Alert) -> str:
+    """The label of an alert's acknowledge button: its id, kind, MAV and subject. It does not change while
+    the alert lasts (its message does): a button is created once and removed once, never relabelled, which
+    viser's client can take for an update of a button it has just removed."""
+    who = f" MAV {alert.vehicle_id}" if alert.vehicle_id is not None else ""
+    also = f" / {alert.subject}" if alert.subject else ""
+    return f"Acknowledge {alert.alert_id}: {alert.kind.replace('_', ' ')}{who}{also}"
 
 
 class AlertsPanel:
@@ -63,18 +68,15 @@ class AlertsPanel:
         self._announce_new(alerts)
 
     def _refresh_buttons(self, alerts: tuple[Alert, ...]) -> None:
-        pending = [a for a in alerts if a.active and not a.acknowledged][:ACK_BUTTONS]
+        pending = [a for a in alerts if not a.acknowledged][:ACK_BUTTONS]
         wanted = {a.alert_id: a for a in pending}
         for alert_id in [i for i in self.buttons if i not in wanted]:
             self.buttons.pop(alert_id).remove()
         for rank, alert in enumerate(pending):
-            button = self.buttons.get(alert.alert_id)
-            label = ack_label(alert)
-            if button is None:
-                button = self._add_button(alert, label, order=2.0 + rank * 0.01)
-                self.buttons[alert.alert_id] = button
-            elif button.label != label:
-                button.label = label
+            if alert.alert_id not in self.buttons:
+                self.buttons[alert.alert_id] = self._add_button(
+                    alert, ack_label(alert), order=2.0 + rank * 0.01
+                )
 
     def _add_button(self, alert: Alert, label: str, *, order: float) -> viser.GuiButtonHandle:
         with self._container:
@@ -94,7 +96,7 @@ class AlertsPanel:
         for a in alerts:
             seen = self._seen.get(a.alert_id)
             now = (a.count, SEVERITY_RANK[a.severity])
-            if a.active and (seen is None or now > seen) and a.severity != Severity.INFO:
+            if a.active and (seen is None or now > seen) and a.severity == Severity.CRITICAL:
                 fresh.append(a)
             self._seen[a.alert_id] = now
         if self._announce is None:

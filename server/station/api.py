@@ -236,7 +236,8 @@ def state_model(view: SceneView, *, counters: dict[str, int]) -> StateModel:
 
 
 def landing_page(*, viser_url: str) -> str:
-    """The page at /: the operator's 3-D view embedded full size, with links to it, the API and the docs."""
+    """The page at /: the operator's 3-D view embedded full size (focused, so that its keyboard shortcuts work
+    at once), with links to it, the API and the docs."""
     url = html.escape(viser_url, quote=True)
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>skyring ground station</title>
@@ -252,6 +253,11 @@ iframe {{ border: 0; width: 100%; height: calc(100% - 32px); display: block; }}
 <a id="operator-link" href="{url}" target="_blank">operator view (full window)</a>
 <a href="/docs">API docs</a><a href="/api/state">state (JSON)</a></header>
 <iframe id="operator-view" src="{url}" title="operator 3-D view"></iframe>
+<script>
+// keys go to the operator page (its Shift+L opens LAND ALL) unless the operator clicks elsewhere
+const view = document.getElementById("operator-view");
+view.addEventListener("load", () => view.focus());
+</script>
 </body></html>"""
 
 
