@@ -54,12 +54,6 @@ def live() -> Iterator[Live]:
     yield from _flying(seed=5)
 
 
-@pytest.fixture
-def fresh_live() -> Iterator[Live]:
-    """A live ground station of its own, flying in formation (for tests that end the flight)."""
-    yield from _flying(seed=6)
-
-
 @pytest.fixture(scope="module")
 def operator_page(live: Live, browser: Browser) -> Iterator[OpenPage]:
     """One browser page on `live`'s landing page, shared by a module's tests that only drive the controls."""

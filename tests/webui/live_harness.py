@@ -32,6 +32,10 @@ CHROMIUM_ARGS = [
     "--disable-sync",
     "--no-first-run",
     "--disable-quic",
+    # software WebGL on a busy machine can stall past the GPU watchdog; a killed GPU process (three in a
+    # session) would leave every later page of the session without WebGL
+    "--disable-gpu-watchdog",
+    "--disable-gpu-process-crash-limit",
 ]
 
 

@@ -56,6 +56,9 @@ class AirframeParams:
     position_std_m: tuple[float, float, float] = (0.5, 0.5, 1.0)  # reported self-localisation std
 
 
+LINK_LOST_AFTER_S = 1.0  # a cut link is flagged lost after this long (PX4 back-end: Px4Config.link_lost_after_s)
+
+
 def _with_link_lost(state: AutopilotState) -> AutopilotState:
     return AutopilotState(
         **{f.name: getattr(state, f.name) for f in fields(AutopilotState) if f.name != "link_lost"},
@@ -84,7 +87,8 @@ class SimAutopilot:
 
     Fault injection (for tests and drills; a real vehicle has no such methods): `set_battery` sets the state
     of charge, `place_at` moves the vehicle, `cut_link` / `restore_link` make its telemetry freeze and its
-    commands vanish as over a lost radio link (the vehicle's own offboard-loss failsafe then holds it).
+    commands vanish as over a lost radio link (the vehicle's own offboard-loss failsafe then holds it); the
+    frozen telemetry is flagged `link_lost` once it is `LINK_LOST_AFTER_S` old, as the PX4 back-end flags it.
     """
 
     def __init__(
@@ -129,6 +133,8 @@ class SimAutopilot:
     # ---- Autopilot protocol -------------------------------------------------------------------------------
     def state(self) -> AutopilotState:
         if self._cut_state is not None:
+            if self._t - self._cut_state.stamp_s > LINK_LOST_AFTER_S and not self._cut_state.link_lost:
+                self._cut_state = _with_link_lost(self._cut_state)
             return self._cut_state
         if self._state is None:
             off, dv = self._drift.offset_m, self._drift.velocity_mps
@@ -231,8 +237,7 @@ class SimAutopilot:
         """Lose the radio link: telemetry freezes at its last reading (flagged `link_lost`) and commands no
         longer arrive; the vehicle flies on, and its offboard-loss failsafe holds it."""
         if self._cut_state is None:
-            last = self.state()
-            self._cut_state = _with_link_lost(last)
+            self._cut_state = self.state()
 
     def restore_link(self) -> None:
         """Get the radio link back: fresh telemetry, commands arrive again."""
