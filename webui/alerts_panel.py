@@ -9,19 +9,24 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from contextlib import AbstractContextManager
-from typing import Any
+from typing import Any, Literal
 
 import viser
 
 from webui.cards import alert_table_html
 from webui.view import SEVERITY_RANK, Alert, OperatorActions, Severity
 
-Run = Callable[[viser.ClientHandle | None, Callable[[], object], str | None], bool]
-Announce = Callable[[str, str, str], None]  # (title, body, colour) to every page
+Clicked = Callable[[Callable[[], object], str | None], Callable[[viser.GuiEvent], None]]
+NotifyColor = Literal["red", "green", "blue", "orange"]
+Announce = Callable[[str, str, NotifyColor], None]  # (title, body, colour) to every page
 
 ACK_BUTTONS = 8  # at most this many per-alert buttons; "Acknowledge all" covers the rest
 NOTIFY_PER_REFRESH = 3
-NOTIFY_COLORS = {Severity.INFO: "blue", Severity.WARNING: "orange", Severity.CRITICAL: "red"}
+NOTIFY_COLORS: dict[Severity, NotifyColor] = {
+    Severity.INFO: "blue",
+    Severity.WARNING: "orange",
+    Severity.CRITICAL: "red",
+}
 
 
 def ack_label(alert: Alert) -> str:
@@ -43,21 +48,19 @@ class AlertsPanel:
         container: AbstractContextManager[Any],
         actions: OperatorActions,
         *,
-        run: Run,
+        clicked: Clicked,
         announce: Announce | None = None,
     ) -> None:
         self._gui = gui
         self._container = container
         self._actions = actions
-        self._run = run
+        self._clicked = clicked
         self._announce = announce
         self._seen: dict[str, tuple[int, int]] = {}  # alert id -> (count, severity rank) announced
         with container:
             self.ack_all = gui.add_button("Acknowledge all", icon=viser.Icon.CHECKS, order=1.0)
             self.table = gui.add_html(alert_table_html(()), order=100.0)
-        self.ack_all.on_click(
-            lambda e: self._run(e.client, self._actions.acknowledge_all_alerts, "Every alert acknowledged")
-        )
+        self.ack_all.on_click(self._clicked(self._actions.acknowledge_all_alerts, "Every alert acknowledged"))
         self.buttons: dict[str, viser.GuiButtonHandle] = {}
 
     def refresh(self, alerts: tuple[Alert, ...]) -> None:
@@ -85,9 +88,7 @@ class AlertsPanel:
             )
         alert_id = alert.alert_id
         button.on_click(
-            lambda e: self._run(
-                e.client, lambda: self._actions.acknowledge_alert(alert_id), f"Alert {alert_id} acknowledged"
-            )
+            self._clicked(lambda: self._actions.acknowledge_alert(alert_id), f"Alert {alert_id} acknowledged")
         )
         return button
 

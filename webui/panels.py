@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import viser
@@ -39,6 +39,7 @@ from webui.view import OperatorActions, SceneView
 
 log = logging.getLogger(__name__)
 
+NotifyColor = Literal["red", "green", "blue", "orange"]
 LAND_ALL_HOTKEY = "L"
 LAND_ALL_MODIFIER = "shift"
 LAND_ALL_SHORTCUT = "Shift+L"
@@ -110,7 +111,7 @@ class OperatorPanel:
         with tabs.add_tab("Team", viser.Icon.USERS) as team_tab:
             self.team = TeamPanel(gui, actions, initial, run=self._run, confirm=self._confirm)
         alerts_tab = tabs.add_tab("Alerts", viser.Icon.ALERT_TRIANGLE)
-        self.alerts = AlertsPanel(gui, alerts_tab, actions, run=self._run, announce=self._announce)
+        self.alerts = AlertsPanel(gui, alerts_tab, actions, clicked=self.clicked, announce=self._announce)
         with tabs.add_tab("Formation", viser.Icon.CIRCLE_DOTTED):
             self._build_formation(gui, initial)
             self._build_obstacles(gui, initial)
@@ -175,10 +176,8 @@ class OperatorPanel:
         stop = gui.add_button("Stop formation (hold)", icon=viser.Icon.PLAYER_PAUSE)
         start.on_click(self._on_start_formation)
         stop.on_click(
-            lambda e: self._run(
-                e.client,
-                lambda: self._actions.set_formation_enabled(False),
-                "Formation stopped: MAVs hold position",
+            self.clicked(
+                lambda: self._actions.set_formation_enabled(False), "Formation stopped: MAVs hold position"
             )
         )
 
@@ -243,8 +242,9 @@ class OperatorPanel:
             for obstacle_id in ids:
                 button = self._server.gui.add_button(f"Remove {obstacle_id}", icon=viser.Icon.TRASH)
                 button.on_click(
-                    lambda e, oid=obstacle_id: self._run(
-                        e.client, lambda: self._actions.remove_obstacle(oid), f"Obstacle {oid} removed"
+                    self.clicked(
+                        lambda oid=obstacle_id: self._actions.remove_obstacle(oid),
+                        f"Obstacle {obstacle_id} removed",
                     )
                 )
                 self._obstacle_buttons[obstacle_id] = button
@@ -284,6 +284,14 @@ class OperatorPanel:
         except (AssertionError, ValueError) as exc:  # the client has not reported its camera yet
             _notify(client, "View", f"the camera is not ready yet, try again ({exc})", color="red")
 
+    def clicked(self, action: Callable[[], object], done: str | None) -> Callable[[viser.GuiEvent], None]:
+        """A button callback that runs `action` for the client that clicked (see `_run`)."""
+
+        def on_click(event: viser.GuiEvent) -> None:
+            self._run(event.client, action, done)
+
+        return on_click
+
     def _run(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> bool:
         """Run one operator action; tell the client the outcome. Never raises: a GUI callback must not die."""
         try:
@@ -299,7 +307,7 @@ class OperatorPanel:
             _notify(client, "Done", done, color="green")
         return True
 
-    def _announce(self, title: str, body: str, color: str) -> None:
+    def _announce(self, title: str, body: str, color: NotifyColor) -> None:
         for client in list(self._server.get_clients().values()):
             _notify(client, title, body, color=color, seconds=8.0)
 
@@ -434,7 +442,7 @@ def _set_range(slider: Any, low: float, high: float) -> None:
 
 
 def _notify(
-    client: viser.ClientHandle | None, title: str, body: str, *, color: str, seconds: float = 6.0
+    client: viser.ClientHandle | None, title: str, body: str, *, color: NotifyColor, seconds: float = 6.0
 ) -> None:
     if client is None:
         return

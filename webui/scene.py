@@ -279,7 +279,7 @@ class SceneRenderer:
         center = np.asarray(estimate.position_m, dtype=float)
         self._covariance.position = center
         self._covariance.wxyz = wxyz
-        self._covariance.scale = tuple(float(a) for a in semi_axes)
+        self._covariance.scale = (float(semi_axes[0]), float(semi_axes[1]), float(semi_axes[2]))
         self._covariance.visible = True
         self._covariance_outline.points = ellipse_outline_segments(center, semi_axes, wxyz)
         self._covariance_outline.visible = True

@@ -205,6 +205,7 @@ class OperatorActions(Protocol):
 
     def add_obstacle(self, *, x_m: float, y_m: float, radius_m: float) -> str:
         """Add a virtual obstacle (vertical cylinder) at ENU (x_m, y_m); returns its id."""
+        ...
 
     def remove_obstacle(self, obstacle_id: str) -> None:
         """Remove a virtual obstacle by id."""
@@ -226,6 +227,7 @@ class OperatorActions(Protocol):
 
     def acknowledge_all_alerts(self) -> int:
         """Mark every alert as seen; returns how many were newly acknowledged."""
+        ...
 
     def set_formation_enabled(self, enabled: bool) -> None:
         """Start (True) or stop (False, hold position) formation control for the whole team."""

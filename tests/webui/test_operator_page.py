@@ -184,7 +184,9 @@ def test_land_all_is_reachable_at_every_scroll_position_and_shift_l_lands_everyo
             close_page(opened)
         assert opened.console_errors == [], opened.console_errors
         if wait_landed:
-            assert all(not v.autopilot.in_air for v in live.station.snapshot().vehicles)
+            assert all(
+                v.autopilot is not None and not v.autopilot.in_air for v in live.station.snapshot().vehicles
+            )
 
 
 # ---- alerts ------------------------------------------------------------------------------------------------
