@@ -4,8 +4,14 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# The pose model's own environment (MediaPipe 0.10.21 needs numpy < 2 and Python <= 3.12): docs/detection.md.
+POSE_VENV := .venv-pose
+POSE_STAMP := $(POSE_VENV)/.installed
+POSE_REQS := vehicles/detect/pose-requirements.txt
+POSE_PYTHON ?= $(shell for p in python3.12 python3.11; do command -v $$p >/dev/null 2>&1 && $$p -c 'import venv' 2>/dev/null && { echo $$p; break; }; done)
+FOOTAGE := /usr/share/doc/opencv-doc/examples/data/vtest.avi
 
-.PHONY: run test bench lint chromium clean
+.PHONY: run test bench lint chromium footage pose-env clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -13,13 +19,27 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
+$(POSE_STAMP): $(POSE_REQS)
+	@test -n "$(POSE_PYTHON)" || { echo "pose-env needs python3.12 or python3.11 (MediaPipe 0.10.21 has no wheel for newer)"; exit 1; }
+	rm -rf $(POSE_VENV)
+	$(POSE_PYTHON) -m venv $(POSE_VENV)
+	$(POSE_VENV)/bin/python -m pip install -q --no-deps -r $(POSE_REQS)
+	$(POSE_VENV)/bin/python -c "import mediapipe as mp; mp.solutions.pose.Pose; from ai_edge_litert.interpreter import Interpreter"
+	touch $(POSE_STAMP)
+
+pose-env: $(POSE_STAMP)
+
+# Real test footage (vtest.avi, basketball1.png, messi5.jpg) from Debian's opencv-doc.
+footage:
+	@test -f $(FOOTAGE) || { $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq opencv-doc; }
+
 chromium:
 	@command -v chromium >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq chromium; }
 
 run: $(STAMP)
 	$(VENV)/bin/skyring serve
 
-test: $(STAMP) chromium
+test: $(STAMP) chromium footage $(POSE_STAMP)
 	$(PY) -m pytest -q -ra -n auto --durations=15
 
 bench: $(STAMP)
@@ -30,4 +50,4 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check controller vehicles server webui tests
 
 clean:
-	rm -rf $(VENV) .pytest_cache
+	rm -rf $(VENV) $(POSE_VENV) .pytest_cache

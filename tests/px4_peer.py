@@ -169,17 +169,18 @@ def free_udp_port() -> int:
 
 
 class _UdpOut:
-    """The file-like sink pymavlink writes frames to: one datagram per frame to the GCS, unless silenced."""
+    """The file-like sink pymavlink writes frames to: one datagram per frame to each GCS, unless silenced."""
 
-    def __init__(self, sock: socket.socket, address: tuple[str, int]) -> None:
-        self.sock, self.address, self.silenced = sock, address, False
+    def __init__(self, sock: socket.socket, addresses: list[tuple[str, int]]) -> None:
+        self.sock, self.addresses, self.silenced = sock, addresses, False
 
     def write(self, data: bytes) -> None:
         if not self.silenced:
-            try:
-                self.sock.sendto(data, self.address)
-            except OSError:
-                pass  # the GCS is not listening yet: UDP drops it, as on a real link
+            for address in self.addresses:
+                try:
+                    self.sock.sendto(data, address)
+                except OSError:
+                    pass  # the GCS is not listening yet: UDP drops it, as on a real link
 
 
 class Px4Peer:
@@ -187,6 +188,8 @@ class Px4Peer:
 
     home: (lat_deg, lon_deg, alt_m) where it boots, which is also its local NED origin unless `origin` says
     otherwise; start_ned_m: (3,) its boot position in that local frame (when origin is not given);
+    extra_gcs_ports: more ground stations it streams to, as PX4 does with one MAVLink instance per link (e.g.
+    the onboard agent's and the station's telemetry radio);
     start_yaw_ned_rad: its heading on the ground; params: overrides of DEFAULT_PARAMS; answers_origin: False
     plays an autopilot that does not answer a GPS_GLOBAL_ORIGIN request.
     """
@@ -204,6 +207,7 @@ class Px4Peer:
         params: dict[str, float] | None = None,
         max_accel_mps2: float = 5.0,
         answers_origin: bool = True,
+        extra_gcs_ports: tuple[int, ...] = (),
     ) -> None:
         self.system_id = system_id
         self.origin = tuple(origin if origin is not None else home)
@@ -213,7 +217,7 @@ class Px4Peer:
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", 0))
         self._sock.setblocking(False)
-        self._out = _UdpOut(self._sock, ("127.0.0.1", gcs_port))
+        self._out = _UdpOut(self._sock, [("127.0.0.1", p) for p in (gcs_port, *extra_gcs_ports)])
         self._mav = mavlink.MAVLink(
             self._out, srcSystem=system_id, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1
         )

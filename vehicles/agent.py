@@ -45,6 +45,8 @@ from controller.messages import (
 from controller.params import ControllerParams, FormationParams
 from controller.tracker import PersonTracker, TrackerStats, Verdict
 from vehicles.autopilot import AutopilotState, Setpoint
+from vehicles.detect.converter import ConverterStats, DetectionConverter
+from vehicles.detect.pixels import CameraDetection
 
 Message = Detection | HorizonPlan
 
@@ -76,7 +78,10 @@ class AgentInputs:
     """One tick's inputs.
 
     own: the autopilot's latest state (None before the first telemetry); detections: the MAV's own camera
-    detections since the last tick; received: teammates' messages delivered since the last tick; obstacles:
+    detections since the last tick, already in the world frame (the simulated camera); camera: the MAV's own
+    camera's pixel detections since the last tick (a real camera through `skyring detect`), converted here
+    with the pose at their capture time (needs the agent's `converter`); received: teammates' messages
+    delivered since the last tick; obstacles:
     static and virtual; formation: the operator's d_des/h_des; role: see AgentRole; roster: (vehicle id, slot
     bearing) of every MAV in formation, this one included, the bearing (ENU, about the person) being
     offset + 2 pi k / K; used for teammates that are unheard.
@@ -84,6 +89,7 @@ class AgentInputs:
 
     own: AutopilotState | None
     detections: tuple[Detection, ...] = ()
+    camera: tuple[CameraDetection, ...] = ()
     received: tuple[Message, ...] = ()
     obstacles: tuple[Obstacle, ...] = ()
     formation: FormationParams = field(default_factory=FormationParams)
@@ -94,8 +100,9 @@ class AgentInputs:
 @dataclass(frozen=True)
 class AgentCounters:
     """Cumulative counts: detections fused from the own camera and from teammates, plans received,
-    messages rejected (malformed, own echoes), controller exceptions caught, braking ticks, ticks that used
-    the roster slot."""
+    messages rejected (malformed, own echoes, camera detections without a converter), controller exceptions
+    caught, braking ticks, ticks that used the roster slot. The camera converter keeps its own counts
+    (`AgentOutputs.camera`)."""
 
     own_detections_fused: int = 0
     teammate_detections_fused: int = 0
@@ -123,6 +130,7 @@ class AgentOutputs:
     teammates_known: int = 0
     used_slot: bool = False
     fault: str | None = None
+    camera: ConverterStats | None = None
 
 
 def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: bool = False) -> HorizonPlan:
@@ -148,8 +156,12 @@ class Agent:
         vehicle_id: int,
         params: ControllerParams | None = None,
         agent_params: AgentParams | None = None,
+        converter: DetectionConverter | None = None,
     ) -> None:
+        """converter: turns the own camera's pixel detections into Detections (None: the agent takes only
+        world-frame detections, as from the simulated camera)."""
         self.vehicle_id = int(vehicle_id)
+        self._converter = converter
         self._params = params = params or ControllerParams()
         self._ap = agent_params or AgentParams()
         self._tracker = PersonTracker(params.tracker)
@@ -178,7 +190,14 @@ class Agent:
         counts = self._counts
         for msg in inputs.received:
             self._receive(msg)
-        for det in inputs.detections:
+        detections = inputs.detections
+        if self._converter is not None:
+            if inputs.own is not None:
+                self._converter.record_pose(inputs.own)
+            detections = detections + self._converter.convert(now_s, inputs.camera)
+        else:
+            counts["rejected_messages"] += len(inputs.camera)
+        for det in detections:
             if isinstance(det, Detection) and det.source_id == self.vehicle_id:
                 if self._tracker.update(det) in (Verdict.ACCEPTED, Verdict.RESET):
                     counts["own_detections_fused"] += 1
@@ -253,7 +272,7 @@ class Agent:
         elif own is not None and inputs.role == AgentRole.AIRBORNE:
             plan = hold_plan(state=own, params=self._params, in_formation=False)
         outbox: list[Message] = [
-            d for d in inputs.detections if isinstance(d, Detection) and d.source_id == self.vehicle_id
+            d for d in detections if isinstance(d, Detection) and d.source_id == self.vehicle_id
         ]
         if plan is not None and now_s - self._last_publish_s >= self._ap.plan_period_s - 1e-9:
             outbox.append(plan)
@@ -270,6 +289,7 @@ class Agent:
             teammates_known=known,
             used_slot=used_slot,
             fault=fault,
+            camera=self._converter.stats() if self._converter is not None else None,
         )
 
     def _can_follow(self, now_s: float) -> bool:

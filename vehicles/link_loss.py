@@ -49,17 +49,51 @@ def silent_vehicle_obstacle(
     positions (M, 3), radius to its farthest point; plus body_radius_m and drift_mps times the silence
     (now_s - state.stamp_s), the growth bounded by max_radius_m.
     """
-    points = np.asarray(state.position_m, dtype=float)[None, :]
+    return _silent_obstacle(
+        vehicle_id=state.vehicle_id,
+        position_m=state.position_m,
+        stamp_s=state.stamp_s,
+        plan=plan,
+        now_s=now_s,
+        params=params,
+    )
+
+
+def silent_teammate_obstacle(
+    *, plan: HorizonPlan, now_s: float, params: SilentVehicleParams = SilentVehicleParams()
+) -> Obstacle:
+    """The same cylinder for a teammate known only by its last plan (an onboard agent that stopped hearing
+    it): its last known position is the plan's x(0) at the plan's stamp."""
+    return _silent_obstacle(
+        vehicle_id=plan.vehicle_id,
+        position_m=plan.positions_m[0],
+        stamp_s=plan.stamp_s,
+        plan=plan,
+        now_s=now_s,
+        params=params,
+    )
+
+
+def _silent_obstacle(
+    *,
+    vehicle_id: int,
+    position_m: np.ndarray,
+    stamp_s: float,
+    plan: HorizonPlan | None,
+    now_s: float,
+    params: SilentVehicleParams,
+) -> Obstacle:
+    points = np.asarray(position_m, dtype=float)[None, :]
     if plan is not None and np.all(np.isfinite(plan.positions_m)):
         points = np.vstack([points, plan.positions_m])
     xy = points[:, :2]
     center = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
     spread = float(np.max(np.linalg.norm(xy - center, axis=1)))
-    silence = max(0.0, now_s - state.stamp_s)
+    silence = max(0.0, now_s - stamp_s)
     growth = min(params.drift_mps * silence, params.max_radius_m)
     height = max(float(points[:, 2].max()), 0.0) + params.headroom_m
     return Obstacle(
-        obstacle_id=f"silent-{state.vehicle_id}",
+        obstacle_id=f"silent-{vehicle_id}",
         center_m=center,
         radius_m=params.body_radius_m + spread + growth,
         height_m=height,

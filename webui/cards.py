@@ -32,6 +32,8 @@ STATUS_MOVING = Status("in transition", "#1c7ed6")
 STATUS_GROUND = Status("on the ground", "#868e96")
 STATUS_WARNING = Status("warning", SEVERITY_COLORS[Severity.WARNING])
 STATUS_CRITICAL = Status("critical", SEVERITY_COLORS[Severity.CRITICAL])
+AGENT_LOST_FLAG = "AGENT LOST"
+SKEW_FLAG = "CLOCK SKEW"
 
 
 def vehicle_status(vehicle: VehicleView, alerts: Iterable[Alert]) -> Status:
@@ -160,8 +162,26 @@ def team_table_html(view: SceneView, colors: dict[int, tuple[int, int, int]]) ->
     )
 
 
+def agent_line(vehicle: VehicleView) -> str:
+    """A networked agent's line: lost, clock skew, its latest command's outcome ("" for an in-process one)."""
+    a = vehicle.agent
+    if a is None:
+        return ""
+    parts = [f"**{AGENT_LOST_FLAG}** ({a.age_s:.1f} s)" if a.lost else "agent ok"]
+    if a.station_lost:
+        parts.append("it lost the station")
+    if a.clock_offset_s is not None:
+        skew = f" **{SKEW_FLAG}**" if a.clock_skew else ""
+        parts.append(f"clock {a.clock_offset_s * 1e3:+.0f} ms{skew}")
+    if a.commands:
+        command_id, action, outcome, message = a.commands[-1]
+        parts.append(f"cmd {command_id} {action}: {outcome}" + (f" ({message})" if message else ""))
+    return " · ".join(parts)
+
+
 def vehicle_detail_markdown(vehicle: VehicleView, alerts: Iterable[Alert]) -> str:
-    """Everything about one MAV, for the detail under the team table."""
+    """Everything about one MAV, for the detail under the team table (with its onboard agent's link, clock
+    and last command when it runs on the vehicle)."""
     v = vehicle
     p, vel = v.position_m, v.velocity_mps
     status = vehicle_status(v, alerts)
@@ -184,6 +204,8 @@ def vehicle_detail_markdown(vehicle: VehicleView, alerts: Iterable[Alert]) -> st
         lines.append("released: the autopilot or a pilot has it, skyring does not steer it")
     if v.fault:
         lines.append(f"last fault: {v.fault}")
+    if v.agent is not None:
+        lines.append(agent_line(v))
     mine = [a for a in alerts if a.active and a.vehicle_id == v.vehicle_id]
     lines += [f"- {a.severity.value}: {a.message}" for a in mine]
     return "  \n".join(_md_escape(line) for line in lines)

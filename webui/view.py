@@ -17,6 +17,27 @@ from controller.messages import Obstacle, PersonEstimate, frozen_array
 from controller.params import FormationParams
 
 
+@dataclass(frozen=True)
+class AgentView:
+    """How the station hears a vehicle's onboard agent over the network (None for in-process agents).
+
+    lost: nothing heard for longer than the station's limit; age_s: since its last state; clock_offset_s:
+    agent clock minus station clock (None before a measurement); clock_skew: beyond the station's limit
+    (50 ms); tick_period_p99_error_s: the agent's control-tick jitter; station_lost: the agent no longer hears
+    the station; rejected_messages: network messages it refused; commands: recent operator commands as
+    (command id, action, outcome "pending"/"acked"/"refused"/"failed", message), newest last.
+    """
+
+    lost: bool
+    age_s: float
+    clock_offset_s: float | None = None
+    clock_skew: bool = False
+    tick_period_p99_error_s: float | None = None
+    station_lost: bool = False
+    rejected_messages: int = 0
+    commands: tuple[tuple[int, str, str, str], ...] = ()
+
+
 @dataclass(frozen=True, eq=False)
 class VehicleView:
     """One MAV as the operator sees it.
@@ -29,7 +50,8 @@ class VehicleView:
     distance_to_person_m: horizontal distance to the fused person estimate (None without one); failsafe: the
     autopilot's own failsafe action in progress ("" when none); arming_refused: why the autopilot last
     refused to arm ("" when it did not); released: the autopilot or a pilot took it out of skyring's
-    control; fault: the controller's last fault line ("" when none).
+    control; fault: the controller's last fault line ("" when none); agent: its onboard agent's link (None
+    when the agent runs in the station).
     """
 
     vehicle_id: int
@@ -46,6 +68,7 @@ class VehicleView:
     solver_time_s: float | None = None
     battery_fraction: float | None = None
     plan_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    agent: AgentView | None = None
     velocity_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
     plan_age_s: float | None = None
     distance_to_person_m: float | None = None

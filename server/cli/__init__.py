@@ -32,6 +32,8 @@ COMMANDS: dict[str, str] = {
     "bench": "server.cli.bench:bench",
     "experiment": "server.cli.experiment:experiment",
     "replay": "server.cli.replay:replay",
+    "agent": "server.cli.agent:agent",
+    "detect": "server.cli.detect:detect",
 }
 
 

@@ -11,11 +11,14 @@ import typer
 SUITES: dict[str, str] = {
     "controller": "server.lab.bench_controller:run",
     "sim": "server.lab.bench_sim:run",
+    "links": "server.lab.bench_links:run",
+    "agents": "server.lab.bench_agents:run",
+    "detect": "server.lab.bench_detect:run",
 }
 
 
 def bench(
-    suite: Annotated[str, typer.Argument(help="controller, sim, or all")] = "all",
+    suite: Annotated[str, typer.Argument(help="controller, sim, links, agents, detect, or all")] = "all",
     repeats: Annotated[int, typer.Option(min=1, help="repetitions per measurement")] = 200,
 ) -> None:
     """Run a benchmark suite and print medians, p99 and ratios."""

@@ -149,6 +149,26 @@ def serve(
         ),
     ] = None,
     no_log: Annotated[bool, typer.Option("--no-log", help="do not write a flight log")] = False,
+    agents: Annotated[
+        str,
+        typer.Option(
+            help="in-process: every agent in this process (default); zenoh: supervise `skyring agent` "
+            "processes found on Zenoh (with --px4 URLs: a direct MAVLink link per vehicle for landing); "
+            "spawn: the one-laptop rehearsal (world here, one agent process per MAV)"
+        ),
+    ] = "in-process",
+    connect: Annotated[
+        list[str] | None, typer.Option(help="Zenoh endpoint to connect to (repeatable)")
+    ] = None,
+    listen: Annotated[
+        list[str] | None, typer.Option(help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    ] = None,
+    team: Annotated[str, typer.Option(help="team name: the Zenoh key prefix skyring/<team>/...")] = "skyring",
+    zenoh_config: Annotated[
+        Path | None,
+        typer.Option(help="Zenoh JSON5 config (TLS/mTLS, access control)", exists=True, dir_okay=False),
+    ] = None,
+    multicast: Annotated[bool, typer.Option(help="find agents by multicast scouting")] = True,
 ) -> None:
     """Run the ground station over the embedded simulation: 3-D operator view, REST API and state stream."""
     if not 1 <= vehicles <= 16:
@@ -163,6 +183,38 @@ def serve(
         if not 0 <= value <= 65535:
             raise typer.BadParameter(f"must be a TCP port (0-65535), got {value}", param_hint=name)
     log_path = log_path_option(log_path=log, no_log=no_log)
+    if agents not in ("in-process", "zenoh", "spawn"):
+        raise typer.BadParameter(f"must be in-process, zenoh or spawn, got {agents!r}", param_hint="--agents")
+    if agents != "in-process":
+        from server.cli.agent import net_config
+        from server.cli.serve_agents import run_agents
+        from vehicles.px4.autopilot import sitl_urls
+
+        if px4_sitl and px4:
+            raise typer.BadParameter(
+                "give either --px4 URL ... or --px4-sitl N, not both", param_hint="--px4"
+            )
+        if px4_sitl:
+            px4 = sitl_urls(px4_sitl)
+
+        run_agents(
+            mode=agents,
+            config=net_config(
+                team=team, connect=connect, listen=listen, zenoh_config=zenoh_config, multicast=multicast
+            ),
+            vehicles=vehicles,
+            px4=[u.strip() for item in px4 or [] for u in item.split(",") if u.strip()],
+            origin=origin,
+            seed=seed,
+            method=method,
+            trees=trees,
+            person=person,
+            host=host,
+            port=port,
+            viser_port=viser_port,
+            log_path=log_path,
+        )
+        return
     if px4 or px4_sitl:
         run_px4(
             px4=px4 or [],

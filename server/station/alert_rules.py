@@ -11,7 +11,8 @@ loop's pace), so a replayed view gives the same conditions as the live one did. 
 - arena: an airborne MAV outside the arena's footprint or above its ceiling (warning; critical beyond
   `arena_critical_m`);
 - link: no telemetry for longer than the station's stale limit (critical in the air, warning on the ground);
-- agent: an airborne MAV with a live link whose controller published no plan for `agent_lost_s` (critical);
+- agent: a networked onboard agent not heard for longer than the station's limit, or an airborne MAV with a
+  live link whose controller published no plan for `agent_lost_s` (critical);
 - realtime: the control loop achieved less than `realtime_fraction` of the speed asked for (warning);
 - failsafe: the autopilot runs its own failsafe (battery, offboard loss, ...) (critical);
 - arming: the autopilot refused to arm (warning);
@@ -142,6 +143,16 @@ def _link(v: VehicleView) -> list[Condition]:
 
 
 def _agent(v: VehicleView, p: AlertParams) -> list[Condition]:
+    if v.agent is not None and v.agent.lost:
+        return [
+            Condition(
+                kind="agent",
+                vehicle_id=v.vehicle_id,
+                severity=Severity.CRITICAL,
+                message=f"MAV {v.vehicle_id} agent lost: nothing heard from its onboard agent for "
+                f"{v.agent.age_s:.1f} s",
+            )
+        ]
     if v.link_stale or not v.in_air or v.phase not in FLYING:
         return []
     age = v.plan_age_s

@@ -66,6 +66,32 @@ class EstimateModel(BaseModel):
     source_vehicle_id: int | None = Field(description="the MAV whose tracker replica this is")
 
 
+class CommandOutcomeModel(BaseModel):
+    """One operator command as one vehicle's agent answered it."""
+
+    command_id: int
+    action: str = Field(description='"configure", "land" or "release"')
+    outcome: str = Field(
+        description='"pending", "acked", "refused" (message says why) or "failed" (timed out)'
+    )
+    message: str
+
+
+class AgentModel(BaseModel):
+    """A vehicle's onboard agent as the station hears it over Zenoh (`skyring serve --agents ...`)."""
+
+    lost: bool = Field(description="no state heard from it for longer than the station's limit (0.5 s)")
+    age_s: float = Field(description="seconds since its last state message")
+    clock_offset_s: float | None = Field(description="its clock minus the station's (heartbeat round trip)")
+    clock_skew: bool = Field(description="the offset exceeds 50 ms")
+    tick_period_p99_error_s: float | None = Field(description="99th percentile of |tick period - nominal|")
+    station_lost: bool = Field(description="it reports that it no longer hears the station")
+    rejected_messages: int = Field(
+        description="network messages it rejected (malformed, foreign, replayed...)"
+    )
+    commands: list[CommandOutcomeModel] = Field(description="recent commands, newest last")
+
+
 class VehicleModel(BaseModel):
     vehicle_id: int
     phase: str
@@ -81,6 +107,7 @@ class VehicleModel(BaseModel):
     solve_status: str
     solver_time_s: float | None
     plan_positions_m: list[Vector3] = Field(description="the latest horizon plan, (N+2, 3)")
+    agent: AgentModel | None = Field(default=None, description="its onboard agent (None: in-process agents)")
 
 
 class PersonModel(BaseModel):
@@ -186,6 +213,23 @@ def vehicle_model(v: VehicleView) -> VehicleModel:
         solve_status=v.solve_status,
         solver_time_s=_num(v.solver_time_s),
         plan_positions_m=[_vec(p) for p in v.plan_positions_m],
+        agent=None if v.agent is None else agent_model(v.agent),
+    )
+
+
+def agent_model(a) -> AgentModel:
+    return AgentModel(
+        lost=a.lost,
+        age_s=float(a.age_s),
+        clock_offset_s=_num(a.clock_offset_s),
+        clock_skew=a.clock_skew,
+        tick_period_p99_error_s=_num(a.tick_period_p99_error_s),
+        station_lost=a.station_lost,
+        rejected_messages=a.rejected_messages,
+        commands=[
+            CommandOutcomeModel(command_id=c, action=act, outcome=out, message=msg)
+            for c, act, out, msg in a.commands
+        ],
     )
 
 

@@ -21,6 +21,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,10 +40,21 @@ from server.station.commands import (
 )
 from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
-from webui.view import Alert, CameraView, GeodeticOrigin, PaceView, Range, SceneView, VehicleView
+from vehicles.pilot import AIRBORNE_PHASES, FLYING_PHASES
+from webui.view import (
+    AgentView,
+    Alert,
+    CameraView,
+    GeodeticOrigin,
+    PaceView,
+    Range,
+    SceneView,
+    VehicleView,
+)
 
-FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)  # the phases that count in the formation's team size
-AIRBORNE_PHASES = (Phase.TAKEOFF, Phase.FORMATION, Phase.HOLDING)  # what LAND ALL lands
+if TYPE_CHECKING:
+    from server.station.fleet import AgentFleet
+
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +113,7 @@ class GroundStation:
     def __init__(
         self,
         *,
-        mission: Mission,
+        mission: Mission | AgentFleet,
         control_period_s: float,
         limits: CommandLimits | None = None,
         start_s: float = 0.0,
@@ -154,7 +166,8 @@ class GroundStation:
         return self._limits
 
     @property
-    def mission(self) -> Mission:
+    def mission(self) -> Mission | AgentFleet:
+        """The in-process mission, or the fleet of onboard agents the station supervises."""
         return self._mission
 
     @property
@@ -483,10 +496,15 @@ def camera_view(params: CameraParams) -> CameraView:
 
 
 def vehicle_view(
-    v: VehicleSnapshot, *, link_stale_s: float, now_s: float, person_m: np.ndarray | None = None
+    v: VehicleSnapshot,
+    *,
+    link_stale_s: float,
+    now_s: float | None = None,
+    person_m: np.ndarray | None = None,
 ) -> VehicleView:
     """One vehicle as the operator sees it (the autopilot's reported pose; stale when telemetry is old).
-    person_m (3,): where the person is believed to be, for the distance to the person."""
+    now_s: mission time of the view, for the plan's age (None: not known); person_m (3,): where the person is
+    believed to be, for the distance to the person."""
     s = v.autopilot
     age = v.link_age_s if v.link_age_s is not None else math.inf
     plan = v.plan.positions_m if v.plan is not None else np.zeros((0, 3))
@@ -503,18 +521,37 @@ def vehicle_view(
         position_m=s.position_m if s is not None else np.zeros(3),
         yaw_rad=s.yaw_rad if s is not None else 0.0,
         link_age_s=age,
-        link_stale=age > link_stale_s or (s is not None and s.link_lost),
+        link_stale=age > link_stale_s
+        or (s is not None and s.link_lost)
+        or (v.agent is not None and v.agent.lost),
         solve_status=v.status.value if v.status is not None else "",
         solver_time_s=v.solver_time_s if v.status is not None else None,
         battery_fraction=s.battery_fraction if s is not None else None,
         plan_positions_m=plan,
         velocity_mps=s.velocity_mps if s is not None else np.zeros(3),
-        plan_age_s=max(0.0, now_s - v.plan.stamp_s) if v.plan is not None else None,
+        plan_age_s=max(0.0, now_s - v.plan.stamp_s) if v.plan is not None and now_s is not None else None,
         distance_to_person_m=distance,
         failsafe=s.failsafe if s is not None else "",
         arming_refused=s.arming_refused if s is not None else "",
         released=bool(s.released) if s is not None else False,
         fault=v.fault or "",
+        agent=agent_view(v.agent) if v.agent is not None else None,
+    )
+
+
+def agent_view(link, *, skew_limit_s: float = 0.05) -> AgentView:
+    """A networked agent's link (vehicles.pilot.AgentLink) as the operator sees it; skew flagged beyond
+    skew_limit_s."""
+    offset = link.clock_offset_s
+    return AgentView(
+        lost=link.lost,
+        age_s=link.age_s if math.isfinite(link.age_s) else 1e9,
+        clock_offset_s=offset,
+        clock_skew=offset is not None and abs(offset) > skew_limit_s,
+        tick_period_p99_error_s=link.tick_period_p99_error_s,
+        station_lost=link.station_lost,
+        rejected_messages=link.rejected_messages,
+        commands=link.commands,
     )
 
 

@@ -1,12 +1,15 @@
 """Running the ground station live: pacing control ticks against the wall clock, and serving the API and the
-operator page beside them in one asyncio loop.
+operator page beside them.
 
-`LiveRunner` advances the station `speed` simulated seconds per wall second in batches short enough that the
-API and the WebSocket stay responsive; when the CPU cannot keep up it re-anchors instead of spiralling and
-counts it; `LiveRunner.pace` tells the station how it keeps up (the real-time factor over the last
-`PACE_WINDOW_S` of wall time), for the operator's header and the "behind real time" alert. `serve_station`
-runs viser, uvicorn and the runner until stopped (SIGINT/SIGTERM or an event), then lands every MAV and
-closes the back-ends in a `finally`, whatever stopped it.
+`LiveRunner` advances the station `speed` simulated seconds per wall second in short batches; when the CPU
+cannot keep up it re-anchors instead of spiralling and counts it; `LiveRunner.pace` tells how it keeps up
+(the real-time factor over the last `PACE_WINDOW_S` of wall time), which every frame hands the station for
+the operator's header and the "behind real time" alert. `serve_station` runs it on a thread of its
+own with its own event loop and clock (`ControlThread`), so neither request bodies nor WebSocket clients on
+the web's event loop can delay a control tick; viser, uvicorn and the frame publisher share the web's loop.
+It serves until stopped (SIGINT/SIGTERM or an event), then lands every MAV and closes the back-ends in a
+`finally`, whatever stopped it. (With `--agents zenoh|spawn` the control loops are in the agents' own
+processes and the station's tick only gathers their state.)
 """
 
 from __future__ import annotations
@@ -89,21 +92,24 @@ class LiveRunner:
         self._sleep = sleep
         self.stats = PaceStats()
         self._window: deque[tuple[float, float]] = deque()  # (wall, simulated) seconds, last PACE_WINDOW_S
+        self._pace = PaceView(requested_speed=speed)
 
     def pace(self) -> PaceView:
         """The requested speed, the real-time factor achieved over the last PACE_WINDOW_S of wall time (None
-        until half a window has passed) and the times the loop fell behind so far."""
-        factor = None
-        if len(self._window) >= 2:
-            (w0, s0), (w1, s1) = self._window[0], self._window[-1]
-            if w1 - w0 >= 0.5 * PACE_WINDOW_S:
-                factor = (s1 - s0) / (w1 - w0)
-        return PaceView(requested_speed=self._speed, realtime_factor=factor, fell_behind=self.stats.lagged)
+        until half a window has passed) and the times the loop fell behind so far. Safe to call from any
+        thread (the control loop replaces the value; it never changes one)."""
+        return self._pace
 
     def _measure(self, wall: float) -> None:
-        self._window.append((wall, self._station.time_s))
-        while len(self._window) > 2 and wall - self._window[1][0] >= PACE_WINDOW_S:
-            self._window.popleft()
+        window = self._window
+        window.append((wall, self._station.time_s))
+        while len(window) > 2 and wall - window[1][0] >= PACE_WINDOW_S:
+            window.popleft()
+        (w0, s0), (w1, s1) = window[0], window[-1]
+        factor = (s1 - s0) / (w1 - w0) if w1 - w0 >= 0.5 * PACE_WINDOW_S else None
+        self._pace = PaceView(
+            requested_speed=self._speed, realtime_factor=factor, fell_behind=self.stats.lagged
+        )
 
     async def run(self, stop: asyncio.Event) -> None:
         """Tick until `stop` is set."""
@@ -131,10 +137,6 @@ class LiveRunner:
             next_tick = wall0 + (self._station.time_s + period - sim0) / self._speed
             await self._sleep(max(0.0, min(next_tick, next_frame) - self._clock()))
 
-    def on_frame(self, callback: Callable[[], None]) -> None:
-        """Call `callback` every frame_period_s of wall time (replacing the one given at construction)."""
-        self._on_frame = callback
-
     def _tick(self) -> None:
         try:
             self._station.tick()
@@ -151,6 +153,57 @@ class LiveRunner:
             self._on_frame()
         except Exception:  # noqa: BLE001 - a drawing problem must not stop the MAVs' control
             log.exception("publishing a frame failed")
+
+
+class ControlThread:
+    """A `LiveRunner` on its own thread, with its own asyncio loop and the monotonic clock."""
+
+    def __init__(self, runner: LiveRunner) -> None:
+        self.runner = runner
+        self.error: BaseException | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._started = threading.Event()
+        self._thread = threading.Thread(target=self._main, name="control-loop", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+        self._started.wait(5.0)
+
+    def is_alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        if self._loop is not None and self._stop is not None and self._thread.is_alive():
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(timeout_s)
+
+    def _main(self) -> None:
+        async def main() -> None:
+            self._loop = asyncio.get_running_loop()
+            self._stop = asyncio.Event()
+            self._started.set()
+            await self.runner.run(self._stop)
+
+        try:
+            asyncio.run(main())
+        except BaseException as exc:  # noqa: BLE001 - reported to serve_station
+            self.error = exc
+        finally:
+            self._started.set()
+
+
+async def _publish_frames(
+    publish: Callable[[], None], period_s: float, stop: asyncio.Event, control: ControlThread
+) -> None:
+    """Draw the operator's view every period_s on the web's loop until stop (or the control loop ended)."""
+    while not stop.is_set() and control.is_alive():
+        try:
+            publish()
+        except Exception:  # noqa: BLE001 - a drawing problem must not stop the MAVs' control
+            log.exception("publishing a frame failed")
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), timeout=period_s)
 
 
 def _publish(station, runner: LiveRunner, ui) -> None:
@@ -256,18 +309,20 @@ async def serve_station(
         )
         if on_ready is not None:
             on_ready(urls, ui)
-        runner = LiveRunner(
-            station=station,
-            speed=speed,
-            frame_period_s=frame_period_s,
+        runner = LiveRunner(station=station, speed=speed)
+        control = ControlThread(runner)
+        control.start()
+        frames_task = asyncio.create_task(
+            _publish_frames(lambda: _publish(station, runner, ui), frame_period_s, stop, control)
         )
-        runner.on_frame(lambda: _publish(station, runner, ui))
-        runner_task = asyncio.create_task(runner.run(stop))
         stop_task = asyncio.create_task(stop.wait())
-        await asyncio.wait({runner_task, serve_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)
+        await asyncio.wait({frames_task, serve_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)
         stop.set()
-        await runner_task
+        await asyncio.to_thread(control.stop)
+        await frames_task
         stop_task.cancel()
+        if control.error is not None:
+            raise control.error
         if serve_task.done() and not serve_task.cancelled() and serve_task.exception() is not None:
             raise serve_task.exception()
         return runner.stats

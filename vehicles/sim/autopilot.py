@@ -56,7 +56,9 @@ class AirframeParams:
     position_std_m: tuple[float, float, float] = (0.5, 0.5, 1.0)  # reported self-localisation std
 
 
-LINK_LOST_AFTER_S = 1.0  # a cut link is flagged lost after this long (PX4 back-end: Px4Config.link_lost_after_s)
+LINK_LOST_AFTER_S = (
+    1.0  # a cut link is flagged lost after this long (PX4 back-end: Px4Config.link_lost_after_s)
+)
 
 
 def _with_link_lost(state: AutopilotState) -> AutopilotState:

@@ -78,7 +78,8 @@ class SimWorld:
     """The simulated world: a person model, static obstacles, bodies with cameras, and a detector.
 
     rngs: one generator per vehicle id for its detector noise. physics_step_s: bodies and cameras are stepped
-    on this grid inside each `advance`, whatever the control rate.
+    on this grid inside each `advance`, whatever the control rate. start_s: the world's time at creation
+    (a camera emulator joining a running mission starts at its time, not at 0).
     """
 
     def __init__(
@@ -91,6 +92,7 @@ class SimWorld:
         camera: CameraParams | None = None,
         detector: DetectorParams | None = None,
         physics_step_s: float = 0.01,
+        start_s: float = 0.0,
     ) -> None:
         camera = camera or CameraParams()
         detector = detector or DetectorParams()
@@ -109,11 +111,13 @@ class SimWorld:
         period = 1.0 / detector.rate_hz
         self._period = period
         # Stagger the cameras over one frame period, as unsynchronised cameras are.
-        self._next_frame = {b.vehicle_id: period * i / max(len(ids), 1) for i, b in enumerate(self._bodies)}
+        self._next_frame = {
+            b.vehicle_id: start_s + period * i / max(len(ids), 1) for i, b in enumerate(self._bodies)
+        }
         self._pending: dict[int, list[Detection]] = {v: [] for v in ids}
         self._frames: deque[CameraFrame] = deque(maxlen=100_000)  # bounded if nobody drains it
-        self._t = 0.0
-        self._truth = person.truth(0.0)
+        self._t = float(start_s)
+        self._truth = person.truth(self._t)
 
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:

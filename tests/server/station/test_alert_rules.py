@@ -11,7 +11,7 @@ import pytest
 from controller.messages import Obstacle
 from controller.params import FormationParams
 from server.station.alert_rules import AlertParams, conditions
-from webui.view import PaceView, Range, SceneView, Severity, VehicleView
+from webui.view import AgentView, PaceView, Range, SceneView, Severity, VehicleView
 
 PARAMS = AlertParams()  # d_min 1.5 m, margin 0.5 m, battery 25 % / 15 %
 
@@ -139,6 +139,13 @@ def test_a_stale_link_is_critical_in_the_air_and_a_warning_on_the_ground():
 def test_an_airborne_mav_whose_controller_published_no_plan_for_a_second_is_an_agent_lost():
     assert kinds(scene(mav(1, plan_age_s=1.5)))["agent"] == Severity.CRITICAL
     assert "agent" not in kinds(scene(mav(1, plan_age_s=0.5)))
+
+
+def test_an_onboard_agent_not_heard_is_an_agent_lost():
+    lost = mav(1, agent=AgentView(lost=True, age_s=0.8), link_stale=True, link_age_s=0.8)
+    found = [c for c in conditions(scene(lost), PARAMS) if c.kind == "agent"]
+    assert [c.severity for c in found] == [Severity.CRITICAL] and "0.8 s" in found[0].message
+    assert "agent" not in kinds(scene(mav(1, agent=AgentView(lost=False, age_s=0.1))))
 
 
 def test_agent_lost_is_not_raised_when_the_link_is_what_is_lost():

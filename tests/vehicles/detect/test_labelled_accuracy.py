@@ -1,0 +1,96 @@
+"""Head and feet accuracy of the default back-end on hand-labelled real frames (vtest.avi and two stills).
+
+Criterion: for every labelled person at most half hidden and at least MIN_PERSON_PX tall, the detector's
+head and feet (whichever are labelled) lie within max(8 px, 5 % of the person's height) of the labels.
+KNOWN_MISSES lists, by name, the people the default back-end does not yet meet it for, with why; the test
+fails if any other person misses (a regression) and also if a known miss starts passing (update the list).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from detect_footage import LABELS, read_frame
+
+from vehicles.detect.backends import HogPoseDetector
+from vehicles.detect.hog import HogParams
+
+pytestmark = pytest.mark.slow  # tens of seconds of HOG and pose model on real frames
+
+MIN_PERSON_PX = 48.0
+"""The smallest person the search is set to find here (HOG at 2x for 768 x 576 frames)."""
+
+KNOWN_MISSES = {
+    "vtest.avi:80:C": "behind the sign and touching B: found as one person with B",
+    "vtest.avi:240:G": "58 px, walking shoulder to shoulder with F: only F is found",
+    "vtest.avi:560:D": "directly behind E: the pose model joins D's head to E's legs",
+    "vtest.avi:560:E": "directly in front of D: same joined person, head 24 px off",
+    "messi5.jpg:None:A": "kicking, bent over: crown 24 px off (tolerance 13.5 px)",
+}
+
+
+def _labelled() -> list[tuple[str, str, int | None, list[dict]]]:
+    doc = json.loads(LABELS.read_text())
+    return [(f"{f['file']}:{f['frame']}", f["file"], f["frame"], f["persons"]) for f in doc["frames"]]
+
+
+def _tested(person: dict) -> bool:
+    head, feet = person["head_px"], person["feet_px"]
+    if person["hidden_fraction"] > 0.5 or (head is None and feet is None):
+        return False
+    if head is not None and feet is not None:
+        return float(np.hypot(feet[0] - head[0], feet[1] - head[1])) >= MIN_PERSON_PX
+    return True
+
+
+def test_the_labels_cover_ten_frames_and_about_fifty_people():
+    frames = _labelled()
+    assert len(frames) == 10
+    people = [p for *_, persons in frames for p in persons]
+    assert 40 <= len(people) <= 60
+    assert sum(_tested(p) for p in people) == 46
+
+
+@pytest.fixture(scope="module")
+def results(pose_model):
+    """Per labelled person: (key, errors (head, feet) px or None when not found, tolerance px)."""
+    detector = HogPoseDetector(
+        pose=pose_model, hog=HogParams(min_person_px=MIN_PERSON_PX, max_work_pixels=2_000_000)
+    )
+    out = []
+    for name, file, frame, persons in _labelled():
+        found = detector.find(read_frame(file, frame))
+        for p in persons:
+            if not _tested(p):
+                continue
+            head = None if p["head_px"] is None else np.array(p["head_px"], float)
+            feet = None if p["feet_px"] is None else np.array(p["feet_px"], float)
+            height = float(np.hypot(*(feet - head))) if head is not None and feet is not None else 80.0
+            tol = max(8.0, 0.05 * height)
+            best = None
+            for q in found:
+                e = (
+                    float(np.hypot(*(q.head_px - head))) if head is not None else 0.0,
+                    float(np.hypot(*(q.feet_px - feet))) if feet is not None else 0.0,
+                )
+                if best is None or max(e) < max(best):
+                    best = e
+            out.append((f"{name}:{p['id']}", best, tol))
+    return out
+
+
+def test_every_person_not_known_to_miss_is_within_tolerance(results):
+    misses = {key: err for key, err, tol in results if err is None or max(err) > tol}
+    unexpected = {k: v for k, v in misses.items() if k not in KNOWN_MISSES}
+    assert not unexpected, f"new misses (head, feet px): {unexpected}"
+    fixed = set(KNOWN_MISSES) - set(misses)
+    assert not fixed, f"these now pass: remove them from KNOWN_MISSES: {sorted(fixed)}"
+    assert len(results) - len(misses) >= 41  # 41 of 46 within tolerance
+
+
+def test_median_head_and_feet_errors_are_a_few_pixels(results):
+    ok = np.array([err for key, err, tol in results if err is not None and key not in KNOWN_MISSES])
+    assert np.median(ok[:, 0]) < 3.0
+    assert np.median(ok[:, 1]) < 3.5

@@ -1,0 +1,1 @@
+"""Networked agents: the wire format, key expressions, the Zenoh transport, and the onboard runner."""

@@ -1,0 +1,310 @@
+"""One vehicle's part of the mission: its autopilot, its agent and its phase machine.
+
+    IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
+    LANDED --release()--> IDLE
+    TAKEOFF, FORMATION --hold()--> HOLDING --release()--> FORMATION;  HOLDING --land()--> LANDING
+    TAKEOFF, FORMATION, HOLDING --(the autopilot lands by itself: a failsafe or a pilot)--> LANDING
+
+A holding MAV hovers where the operator stopped it, out of formation control: its teammates avoid it and
+re-space without it.
+
+The in-process `Mission` holds one `VehiclePilot` per vehicle and feeds them the team's roster; the onboard
+agent process (`vehicles.net.onboard`) holds exactly one and builds the roster from what it hears over the
+network. Both therefore fly the same phase machine, role logic and take-off/landing retries.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import StrEnum
+
+from controller.messages import HorizonPlan, PersonEstimate, SolveStatus
+from controller.params import ControllerParams, FormationParams
+from controller.tracker import TrackerStats
+from vehicles.agent import Agent, AgentCounters, AgentInputs, AgentOutputs, AgentRole
+from vehicles.autopilot import Autopilot, AutopilotState, FlightMode, Setpoint
+from vehicles.world import PERSON_CENTRE_HEIGHT_M
+
+
+class Phase(StrEnum):
+    """Where a vehicle is in the mission."""
+
+    IDLE = "idle"
+    TAKEOFF = "takeoff"
+    FORMATION = "formation"
+    HOLDING = "holding"  # hovering where the operator stopped it, out of formation control
+    LANDING = "landing"
+    LANDED = "landed"
+
+
+FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)  # in the formation's roster
+AIRBORNE_PHASES = (Phase.TAKEOFF, Phase.FORMATION, Phase.HOLDING)  # what LAND ALL lands
+
+
+class MissionError(ValueError):
+    """An operator action the mission refused; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class MissionParams:
+    """takeoff_height_m: None = the formation height (h_des above a person standing on the ground) clamped
+    0.5 m inside the MPC's height bounds; at_height_tolerance_m: takeoff is done within this of the target;
+    retry_s: a takeoff or land command that shows no effect is re-sent after this long (lost commands over a
+    real link); slot_offset_rad: bearing of roster slot 0 about the person (slot k at offset + 2 pi k / K)."""
+
+    takeoff_height_m: float | None = None
+    at_height_tolerance_m: float = 0.5
+    retry_s: float = 1.0
+    slot_offset_rad: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleSnapshot:
+    """Everything a display needs about one vehicle.
+
+    autopilot: latest telemetry; plan: the latest horizon plan; person: this MAV's fused estimate (its
+    position_cov_m2 is the ellipsoid); setpoint: last set-point sent; status/solver_time_s: the controller's
+    last result; tick_s: wall time of the last agent tick (None without a clock); link_age_s: age of the
+    telemetry; teammates_known: teammates whose plans are fresh; used_slot: steering to the roster slot
+    because teammates are unheard; fault: last fault line; agent: how the ground station hears this
+    vehicle's agent over the network (None when the agent runs in the station's own process).
+    """
+
+    vehicle_id: int
+    phase: Phase
+    autopilot: AutopilotState | None
+    plan: HorizonPlan | None
+    person: PersonEstimate | None
+    setpoint: Setpoint | None
+    status: SolveStatus | None
+    solver_time_s: float
+    tick_s: float | None
+    link_age_s: float | None
+    teammates_known: int
+    used_slot: bool
+    fault: str | None
+    tracker: TrackerStats
+    counters: AgentCounters
+    agent: AgentLink | None = None
+
+
+@dataclass(frozen=True)
+class AgentLink:
+    """The station's view of one networked agent.
+
+    lost: no state heard for longer than the station's limit; age_s: since its last state message;
+    clock_offset_s: agent clock minus station clock, measured from heartbeat round trips (None before one);
+    tick_period_p99_error_s: the agent's reported 99th percentile of |tick period - nominal|;
+    commands: per-vehicle command outcomes ("pending", "acked", "refused", "failed") of the latest
+    commands, newest last, each as (command id, kind, outcome, message); rejected_messages: network messages
+    this agent rejected (malformed, oversized, foreign team, unknown sender, other version, replayed);
+    station_lost: the agent reports it no longer hears the station.
+    """
+
+    lost: bool
+    age_s: float
+    clock_offset_s: float | None
+    tick_period_p99_error_s: float | None
+    commands: tuple[tuple[int, str, str, str], ...] = ()
+    rejected_messages: int = 0
+    station_lost: bool = False
+
+
+class VehiclePilot:
+    """The phase machine of one vehicle and the agent that flies it. `observe` then `tick`, every control
+    period; operator actions (`land`, `hold`, `release`) take effect at once and show in the next readings.
+
+    clock: only used to time agent ticks (e.g. time.perf_counter); None leaves tick_s unset.
+    """
+
+    def __init__(
+        self,
+        *,
+        autopilot: Autopilot,
+        agent: Agent,
+        params: MissionParams | None = None,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        self.autopilot = autopilot
+        self.agent = agent
+        self.params = params or MissionParams()
+        self.phase = Phase.IDLE
+        self.command_s = -math.inf
+        self.last: AgentOutputs | None = None
+        self.last_setpoint: Setpoint | None = None
+        self.tick_s: float | None = None
+        self.paused = False
+        self.state: AutopilotState | None = None
+        self._clock = clock
+        self._now = 0.0
+
+    @property
+    def vehicle_id(self) -> int:
+        return self.autopilot.vehicle_id
+
+    @property
+    def silent(self) -> bool:
+        """The autopilot's link is lost: nothing computed here would reach it."""
+        return self.state is not None and self.state.link_lost
+
+    @property
+    def released(self) -> bool:
+        """A pilot or the autopilot's failsafe has it: teammates avoid it, nobody steers it."""
+        return self.state is not None and self.state.released
+
+    @property
+    def in_roster(self) -> bool:
+        """Counts in the formation: taking off or flying it, heard, and not taken by a pilot."""
+        return self.phase in FLYING_PHASES and not self.silent and not self.released
+
+    # ---- operator actions ---------------------------------------------------------------------------------
+    def land(self, now_s: float) -> None:
+        """Land now; MissionError when already on the ground."""
+        if self.phase in (Phase.IDLE, Phase.LANDED):
+            raise MissionError(f"vehicle {self.vehicle_id} is on the ground already ({self.phase.value})")
+        self.start_landing(now_s)
+
+    def start_landing(self, now_s: float) -> None:
+        self.phase = Phase.LANDING
+        self.command_s = now_s
+        self.autopilot.land()
+
+    def hold(self, now_s: float) -> None:
+        """Stop where it is, out of formation control; MissionError unless taking off or flying formation
+        in the air."""
+        if self.phase not in FLYING_PHASES:
+            raise MissionError(
+                f"vehicle {self.vehicle_id} is {self.phase.value}; only a vehicle taking off or flying "
+                "formation can be held"
+            )
+        if self.state is None or not self.state.in_air:
+            raise MissionError(
+                f"vehicle {self.vehicle_id} is not in the air yet; land it instead to stop its takeoff"
+            )
+        self.phase = Phase.HOLDING
+        self.command_s = now_s
+        self.autopilot.hold()
+
+    def release(self) -> None:
+        """Give a vehicle back to the formation: a landed one takes off again (when formation is enabled), a
+        holding one rejoins from where it hovers; MissionError otherwise."""
+        if self.phase == Phase.HOLDING:
+            self.phase = Phase.FORMATION
+            return
+        if self.phase != Phase.LANDED:
+            raise MissionError(
+                f"vehicle {self.vehicle_id} is {self.phase.value}; only a landed or holding vehicle can be "
+                "released"
+            )
+        self.phase = Phase.IDLE
+
+    # ---- the control tick ---------------------------------------------------------------------------------
+    def observe(self, now_s: float, *, enabled: bool, takeoff_height_m: float) -> AutopilotState | None:
+        """Read the autopilot and advance the phase machine (take-off, landing and their retries)."""
+        self._now = now_s
+        self.state = s = self.autopilot.state()
+        if s is None:
+            return None
+        retry = now_s - self.command_s >= self.params.retry_s
+        if self.phase in AIRBORNE_PHASES and s.in_air and s.released and s.mode == FlightMode.LAND:
+            self.phase = Phase.LANDING  # the autopilot's failsafe (or a pilot) is landing it
+            self.command_s = now_s
+        elif self.phase == Phase.IDLE and enabled and not s.in_air:
+            self.phase = Phase.TAKEOFF
+            self.command_s = now_s
+            self.autopilot.takeoff(takeoff_height_m)
+        elif self.phase == Phase.TAKEOFF:
+            if (
+                s.in_air
+                and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
+                and (abs(s.position_m[2] - takeoff_height_m) <= self.params.at_height_tolerance_m)
+            ):
+                self.phase = Phase.FORMATION
+                self.paused = False
+            elif retry and s.mode != FlightMode.TAKEOFF and not s.in_air:
+                self.command_s = now_s
+                self.autopilot.takeoff(takeoff_height_m)
+        elif self.phase == Phase.FORMATION:
+            if not s.in_air and not s.armed:
+                self.phase = Phase.LANDED
+            elif not enabled and not self.paused:
+                self.paused = True
+                self.autopilot.hold()
+            elif enabled:
+                self.paused = False
+        elif self.phase == Phase.HOLDING:
+            if not s.in_air and not s.armed:
+                self.phase = Phase.LANDED
+            elif retry and s.mode not in (FlightMode.HOLD, FlightMode.MANUAL) and not s.released:
+                self.command_s = now_s
+                self.autopilot.hold()
+        elif self.phase == Phase.LANDING:
+            if not s.in_air:
+                self.phase = Phase.LANDED
+            elif retry and s.mode != FlightMode.LAND:
+                self.command_s = now_s
+                self.autopilot.land()
+        return s
+
+    def role(self, *, enabled: bool) -> AgentRole:
+        """What the agent should do this tick, from the phase and the formation switch."""
+        if self.phase == Phase.FORMATION and enabled and not self.released:
+            return AgentRole.FORMATION
+        airborne = self.state is not None and self.state.in_air
+        if airborne and self.phase in (*AIRBORNE_PHASES, Phase.LANDING):
+            return AgentRole.AIRBORNE
+        return AgentRole.GROUND
+
+    def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
+        """Run the agent and send its set-point to the autopilot when it flies the formation."""
+        t0 = self._clock() if self._clock is not None else None
+        out = self.agent.tick(now_s, inputs)
+        if t0 is not None and self._clock is not None:
+            self.tick_s = self._clock() - t0
+        self.last = out
+        if out.setpoint is not None and inputs.role == AgentRole.FORMATION:
+            self.autopilot.send_setpoint(out.setpoint)
+            self.last_setpoint = out.setpoint
+        return out
+
+    def snapshot(self, now_s: float | None = None) -> VehicleSnapshot:
+        """This vehicle now, for displays, logs and metrics (link age against now_s, default: last tick)."""
+        now = self._now if now_s is None else now_s
+        out, state = self.last, self.state
+        control = out.control if out is not None else None
+        return VehicleSnapshot(
+            vehicle_id=self.vehicle_id,
+            phase=self.phase,
+            autopilot=state,
+            plan=out.plan if out is not None else None,
+            person=out.person if out is not None else None,
+            setpoint=self.last_setpoint,
+            status=control.status if control is not None else None,
+            solver_time_s=control.solver_time_s if control is not None else 0.0,
+            tick_s=self.tick_s,
+            link_age_s=(now - state.stamp_s) if state is not None else None,
+            teammates_known=out.teammates_known if out is not None else 0,
+            used_slot=out.used_slot if out is not None else False,
+            fault=out.fault if out is not None else None,
+            tracker=out.tracker if out is not None else TrackerStats(),
+            counters=out.counters if out is not None else AgentCounters(),
+        )
+
+
+def takeoff_height_m(
+    *, params: MissionParams, controller_params: ControllerParams, formation: FormationParams
+) -> float:
+    """The take-off height: MissionParams.takeoff_height_m, else h_des above a standing person's body centre,
+    kept 0.5 m inside the MPC's height bounds."""
+    if params.takeoff_height_m is not None:
+        return params.takeoff_height_m
+    lo, hi = controller_params.mpc.position_min_m[2] + 0.5, controller_params.mpc.position_max_m[2] - 0.5
+    return min(max(formation.h_des_m + PERSON_CENTRE_HEIGHT_M, lo), hi)
+
+
+def roster_slots(members: list[int], *, offset_rad: float) -> tuple[tuple[int, float], ...]:
+    """(vehicle id, slot bearing) of every MAV in formation, in the order given: offset + 2 pi k / K."""
+    k = len(members)
+    return tuple((vid, offset_rad + 2.0 * math.pi * i / k) for i, vid in enumerate(members))
