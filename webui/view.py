@@ -157,12 +157,15 @@ class Alert:
 @dataclass(frozen=True)
 class PaceView:
     """How the control loop keeps up with the wall clock: requested_speed (simulated seconds per wall second
-    asked for; 1 for real vehicles), realtime_factor (achieved over the last few wall seconds, None until
-    measured) and fell_behind (times the loop gave up catching up since the start)."""
+    asked for; 1 for real vehicles), realtime_factor (achieved over the last second of wall time, None until
+    measured), capacity (the speed the last few ticks' computing time allows: a loop whose ticks take longer
+    than their period falls behind, which this shows before the achieved factor does; None until measured)
+    and fell_behind (times the loop gave up catching up since the start)."""
 
     requested_speed: float
     realtime_factor: float | None = None
     fell_behind: int = 0
+    capacity: float | None = None
 
 
 @dataclass(frozen=True)

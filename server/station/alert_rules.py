@@ -13,7 +13,8 @@ loop's pace), so a replayed view gives the same conditions as the live one did. 
 - link: no telemetry for longer than the station's stale limit (critical in the air, warning on the ground);
 - agent: a networked onboard agent not heard for longer than the station's limit, or an airborne MAV with a
   live link whose controller published no plan for `agent_lost_s` (critical);
-- realtime: the control loop achieved less than `realtime_fraction` of the speed asked for (warning);
+- realtime: the control loop achieved less than `realtime_fraction` of the speed asked for over the last
+  second, or its last ticks took so long that it cannot reach that fraction (warning);
 - failsafe: the autopilot runs its own failsafe (battery, offboard loss, ...) (critical);
 - arming: the autopilot refused to arm (warning);
 - solver: the MPC failed and the MAV brakes instead (warning).
@@ -253,16 +254,21 @@ def _separation(view: SceneView, p: AlertParams) -> list[Condition]:
 
 def _realtime(view: SceneView, p: AlertParams) -> list[Condition]:
     pace = view.pace
-    if pace is None or pace.realtime_factor is None:
+    if pace is None:
         return []
-    if pace.realtime_factor >= p.realtime_fraction * pace.requested_speed:
+    floor = p.realtime_fraction * pace.requested_speed
+    achieved, capacity = pace.realtime_factor, pace.capacity
+    if achieved is not None and achieved < floor:
+        why = f"{achieved:.2f}x achieved"
+    elif capacity is not None and capacity < floor:
+        why = f"its ticks allow {capacity:.2f}x at most"
+    else:
         return []
     return [
         Condition(
             kind="realtime",
             vehicle_id=None,
             severity=Severity.WARNING,
-            message=f"control loop behind real time: {pace.realtime_factor:.2f}x achieved, "
-            f"{pace.requested_speed:g}x asked",
+            message=f"control loop behind real time: {why}, {pace.requested_speed:g}x asked",
         )
     ]

@@ -34,6 +34,7 @@ from webui.view import PaceView
 log = logging.getLogger(__name__)
 
 PACE_WINDOW_S = 1.0  # wall seconds the reported real-time factor is measured over
+CAPACITY_TICKS = 5  # ticks whose computing time the reported capacity is measured over
 
 
 class Steppable(Protocol):
@@ -92,12 +93,14 @@ class LiveRunner:
         self._sleep = sleep
         self.stats = PaceStats()
         self._window: deque[tuple[float, float]] = deque()  # (wall, simulated) seconds, last PACE_WINDOW_S
+        self._tick_costs: deque[float] = deque(maxlen=CAPACITY_TICKS)  # wall seconds of the last ticks
         self._pace = PaceView(requested_speed=speed)
 
     def pace(self) -> PaceView:
         """The requested speed, the real-time factor achieved over the last PACE_WINDOW_S of wall time (None
-        until half a window has passed) and the times the loop fell behind so far. Safe to call from any
-        thread (the control loop replaces the value; it never changes one)."""
+        until half a window has passed), the speed the last CAPACITY_TICKS ticks' computing time allows, and
+        the times the loop fell behind so far. Safe to call from any thread (the control loop replaces the
+        value; it never changes one)."""
         return self._pace
 
     def _measure(self, wall: float) -> None:
@@ -107,8 +110,15 @@ class LiveRunner:
             window.popleft()
         (w0, s0), (w1, s1) = window[0], window[-1]
         factor = (s1 - s0) / (w1 - w0) if w1 - w0 >= 0.5 * PACE_WINDOW_S else None
+        costs = self._tick_costs
+        capacity = None
+        if len(costs) == costs.maxlen and sum(costs) > 0.0:
+            capacity = len(costs) * self._station.control_period_s / sum(costs)
         self._pace = PaceView(
-            requested_speed=self._speed, realtime_factor=factor, fell_behind=self.stats.lagged
+            requested_speed=self._speed,
+            realtime_factor=factor,
+            fell_behind=self.stats.lagged,
+            capacity=capacity,
         )
 
     async def run(self, stop: asyncio.Event) -> None:
@@ -138,12 +148,14 @@ class LiveRunner:
             await self._sleep(max(0.0, min(next_tick, next_frame) - self._clock()))
 
     def _tick(self) -> None:
+        start = self._clock()
         try:
             self._station.tick()
         except Exception:  # noqa: BLE001 - the live loop must survive a failing tick; it is counted and logged
             self.stats.tick_errors += 1
             if self.stats.tick_errors <= 10 or self.stats.tick_errors % 1000 == 0:
                 log.exception("control tick failed (%d so far)", self.stats.tick_errors)
+        self._tick_costs.append(self._clock() - start)
         self.stats.ticks += 1
 
     def _frame(self) -> None:

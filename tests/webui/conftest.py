@@ -56,9 +56,10 @@ def live() -> Iterator[Live]:
 
 @pytest.fixture(scope="module")
 def operator_page(live: Live, browser: Browser) -> Iterator[OpenPage]:
-    """One browser page on `live`'s landing page, shared by a module's tests that only drive the controls."""
-    from live_harness import close_page, open_page
+    """One browser page on `live`'s operator page (viser's own address, as `skyring serve` prints it),
+    shared by a module's tests that only drive the controls; the landing page has tests of its own."""
+    from live_harness import close_page, open_operator
 
-    opened = open_page(browser, live.urls.api, ui=live.ui)
+    opened = open_operator(browser, live.urls.operator, viewport=(1100, 700), ui=live.ui)
     yield opened
     close_page(opened)

@@ -131,11 +131,13 @@ class OpenPage:
     console_errors: list[str]
     requests: list[str]
     client: object = None
+    embedded: bool = True
 
     @property
-    def operator(self) -> FrameLocator:
-        """The embedded viser page (of a landing page opened with `open_page`)."""
-        return self.page.frame_locator("#operator-view")
+    def operator(self) -> FrameLocator | Page:
+        """The operator page: the landing page's embedded one (`open_page`), or the page itself
+        (`open_operator`)."""
+        return self.page.frame_locator("#operator-view") if self.embedded else self.page
 
 
 def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
@@ -149,21 +151,23 @@ def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
     return opened
 
 
+SOFTWARE_GL_DPR = 0.5  # see open_operator
+
+
 def open_page(browser: Browser, url: str, *, ui=None, viewport: tuple[int, int] = (1100, 700)) -> OpenPage:
     """Open the landing page `url` in a new context, recording console errors, page errors and every request
     URL; wait for the embedded operator page's canvas and controls. With the station's `ui`, also find the
-    page's viser client (the one that connected last)."""
+    page's viser client (the one that connected last). Its 3-D view renders at full resolution (the landing
+    page is served as it is); tests that only drive the controls use `open_operator`."""
     opened = _recording(browser, viewport)
     opened.page.goto(url)
     frame = opened.page.frame_locator("#operator-view")
     frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
     frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=30_000)
+    settle(opened.page)
     if ui is not None:
         opened.client = newest_client(ui)
     return opened
-
-
-SOFTWARE_GL_DPR = 0.5  # see open_operator
 
 
 def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=None) -> OpenPage:
@@ -173,6 +177,7 @@ def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=N
     at full resolution on a busy two-core machine the renderer keeps the page's thread so busy that every
     step of a test waits seconds for it."""
     opened = _recording(browser, viewport)
+    opened.embedded = False
     opened.page.goto(f"{url}?fixedDpr={SOFTWARE_GL_DPR}")
     opened.page.locator("canvas").first.wait_for(state="visible", timeout=30_000)
     opened.page.get_by_role("button", name="LAND ALL").wait_for(state="visible", timeout=30_000)

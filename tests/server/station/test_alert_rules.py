@@ -158,6 +158,13 @@ def test_the_loop_is_behind_real_time_below_80_percent_of_the_speed_asked(achiev
     assert ("realtime" in kinds(view)) == raised
 
 
+def test_ticks_slower_than_their_period_are_behind_real_time_before_the_achieved_factor_drops():
+    view = scene(mav(1), pace=PaceView(requested_speed=1.0, realtime_factor=0.98, capacity=0.5))
+    (c,) = conditions(view, PARAMS)
+    assert c.kind == "realtime" and "its ticks allow 0.50x at most, 1x asked" in c.message
+    assert "realtime" not in kinds(scene(mav(1), pace=PaceView(requested_speed=1.0, capacity=3.0)))
+
+
 def test_autopilot_failsafe_is_critical_and_arming_refused_a_warning():
     view = scene(
         mav(1, failsafe="battery 14 % at or below 15 %: landing"), mav(2, (8, 8, 9), arming_refused="x")
