@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import httpx
 import numpy as np
 import pytest
-from live_harness import ARTIFACTS, Live, OpenPage, close_page, open_operator, open_tab, start_live
+from live_harness import ARTIFACTS, Live, OpenPage, close_page, open_operator, open_tab, settle, start_live
 from playwright.sync_api import Locator, Page, expect
 from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
 
@@ -270,7 +270,8 @@ class Raised:
 
 def raise_and_time(live: Live, page: Page, *, kind: str, text: str, inject: Callable[[], None]) -> Raised:
     """Inject a condition; time how long until its alert is active in /api/state (in a thread) and in the
-    page's alert list."""
+    page's alert list. The page is let settle first (drawing frames again after the last tab switch)."""
+    settle(page)
     seen: dict[str, float | None] = {}
 
     def poll_api() -> None:
