@@ -184,6 +184,29 @@ def test_cancelling_land_all_keeps_every_mav_in_formation(live, operator_page):
     assert live.phases() == {Phase.FORMATION}
 
 
+def test_start_formation_asks_first_because_it_can_take_mavs_off_the_ground(live, operator_page):
+    frame = operator_page.operator
+    open_tab(frame, "Formation")
+    frame.get_by_role("button", name="Start formation", exact=True).click()
+    expect(frame.get_by_text("Start formation?", exact=True)).to_be_visible()
+    frame.get_by_role("button", name="Cancel").click()
+    expect(frame.get_by_text("Start formation?", exact=True)).to_be_hidden()
+
+
+def test_hold_stops_the_chosen_mav_at_once_and_release_asks_before_it_rejoins(live, operator_page):
+    frame = operator_page.operator
+    open_tab(frame, "Team")
+    frame.get_by_role("combobox").first.click()  # the "Details of" drop-down
+    frame.get_by_role("option", name="MAV 2", exact=True).click()
+    frame.get_by_role("button", name="Hold MAV 2").click()
+    live.wait_for(lambda: live.station.mission.phase(2) == Phase.HOLDING, sim_s=2.0, what="MAV 2 holding")
+    assert live.station.mission.phase(1) == Phase.FORMATION
+    frame.get_by_role("button", name="Release MAV 2").click()
+    expect(frame.get_by_text("Release MAV 2?", exact=True)).to_be_visible()
+    frame.get_by_role("dialog").get_by_role("button", name="Release MAV 2").click()
+    live.wait_for(lambda: live.station.mission.phase(2) == Phase.FORMATION, sim_s=2.0, what="MAV 2 back")
+
+
 def test_several_clients_see_the_same_state(live, browser, operator_page):
     pages = [operator_page, open_page(browser, live.urls.api)]
     try:

@@ -85,14 +85,17 @@ def assert_land_all_reachable(page: Page, where: str) -> int:
     return result["scrollers"]
 
 
-def check_every_scroll_position(page: Page, label: str) -> int:
+def check_every_scroll_position(page: Page, label: str, *, shots: str | None = None) -> int:
     """LAND ALL stays reachable at every scroll position of every tab, and after wheeling over the control
-    panel; Playwright's own actionability check agrees. Returns how many areas scrolled at most."""
+    panel; Playwright's own actionability check agrees. Returns how many areas scrolled at most. With
+    `shots`, each tab is saved as a screenshot first (named after it)."""
     most = 0
     size = page.viewport_size
     assert size is not None
     for tab in TABS:
         open_tab(page, tab)
+        if shots is not None:
+            screenshot(page, f"{shots}-tab-{tab.lower()}")
         most = max(most, assert_land_all_reachable(page, f"{label}, tab {tab}"))
     page.mouse.move(size["width"] - 100, size["height"] / 2)
     page.mouse.wheel(0, 5000)
@@ -160,7 +163,9 @@ def test_land_all_is_reachable_at_every_scroll_position_and_shift_l_lands_everyo
             for width, height in VIEWPORTS:
                 page.set_viewport_size({"width": width, "height": height})
                 label = f"{vehicles} MAVs at {width}x{height}"
-                scrollers = check_every_scroll_position(page, label)
+                first = (width, height) == VIEWPORTS[0]
+                shots = f"{vehicles}mavs-{width}x{height}" if first else None
+                scrollers = check_every_scroll_position(page, label, shots=shots)
                 assert scrollers >= 1, f"{label}: nothing scrolls, so the check proved nothing"
                 open_tab(page, "Team")
                 page.evaluate(REACHABLE_JS)  # leaves every list scrolled to its end
