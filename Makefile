@@ -11,7 +11,7 @@ POSE_REQS := vehicles/detect/pose-requirements.txt
 POSE_PYTHON ?= $(shell for p in python3.12 python3.11; do command -v $$p >/dev/null 2>&1 && $$p -c 'import venv' 2>/dev/null && { echo $$p; break; }; done)
 FOOTAGE := /usr/share/doc/opencv-doc/examples/data/vtest.avi
 
-.PHONY: run test bench lint chromium footage pose-env clean
+.PHONY: run test check bench lint chromium footage pose-env clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -42,12 +42,17 @@ run: $(STAMP)
 test: $(STAMP) chromium footage $(POSE_STAMP)
 	$(PY) -m pytest -q -ra -n auto --durations=15
 
+# The fast part: no closed-loop runs, browser or end-to-end tests (they run in `make test` and CI).
+check: $(STAMP) footage $(POSE_STAMP)
+	$(PY) -m pytest -q -ra -n auto -m "not slow and not browser and not e2e"
+
 bench: $(STAMP)
 	$(VENV)/bin/skyring bench all
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check controller vehicles server webui tests
 	$(VENV)/bin/ruff format --check controller vehicles server webui tests
+	$(VENV)/bin/pyright
 
 clean:
 	rm -rf $(VENV) $(POSE_VENV) .pytest_cache

@@ -1,6 +1,6 @@
 """The `price` baseline's potential field (Price et al., RA-L 2018), applied after the MPC.
 
-Price et al. (METHOD.md "Baselines") steer each MAV with an MPC to the point on the d_des circle (zero
+Price et al. (docs/method.md#baselines) steer each MAV with an MPC to the point on the d_des circle (zero
 terminal velocity, terminal weight 1000, input weight 0.1, no external inputs) and then correct its way-point
 with a
 potential field: repulsion from the teammates' current positions and attraction to that goal point. They share
@@ -28,7 +28,7 @@ from controller.fields import FieldParams, ObstacleSet, clamp_norm, cotangential
 class PriceParams:
     """The `price` baseline's weights and post-MPC field.
 
-    input_weight, terminal_weight: its MPC's W_E and terminal position/velocity weights (METHOD.md).
+    input_weight, terminal_weight: its MPC's W_E and terminal position/velocity weights.
     attraction_gain_per_s2: goal attraction k (m/s^2 per m of distance to the goal point), clamped at
         attraction_max_mps2. Teammate and obstacle repulsion use FieldParams' thresholds and peaks.
     """
@@ -51,8 +51,10 @@ def _repulsion(
 ) -> np.ndarray:
     """(2,) sum of cotangential repulsions F(dist) (J,) along diff (J, 2)."""
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=fields.freeze_fraction)
-    mag = cotangential_magnitude(
-        dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=fields.freeze_fraction
+    mag = np.asarray(
+        cotangential_magnitude(
+            dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=fields.freeze_fraction
+        )
     )
     norm = np.sqrt(np.einsum("ji,ji->j", diff, diff))
     return (mag[:, None] * diff / np.where(norm > 1e-9, norm, np.inf)[:, None]).sum(axis=0)

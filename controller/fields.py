@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controller.angles import wrap_angle
 from controller.messages import HorizonPlan, Obstacle
 
 HALF_PI = 0.5 * np.pi
@@ -26,81 +27,25 @@ SANE_ABS = 1.0e6  # coordinates (m) or covariances (m^2) beyond this are garbage
 
 @dataclass(frozen=True)
 class FieldParams:
-    """Gains and thresholds of the external inputs (METHOD.md "The external inputs"). Distances in m, angles
-    in rad, forces in m/s^2 (they enter the dynamics as accelerations).
+    """Gains and thresholds of the external inputs; every value's measured reason is in
+    docs/method.md#external-inputs. Distances in m, angles in rad, forces in m/s^2 (accelerations).
 
-    The values were tuned in closed loop: K = 2..16 MAVs starting 2 m apart on one side of the person, 10 Hz
-    control, the MPC with the paper's weights and the pass-through reference of reference.py, vehicles either
-    following their plans exactly or through a PX4-like cascade; then a person walking at 1 m/s, and the
-    paper's path with its 13 trees. Measured with these values (tests/controller/test_closed_loop.py pins
-    the first ones): convergence to < 5 deg / 0.5 m / 0.3 m in 9.5-17.3 s for every K, minimum separation
-    1.73 m (K = 16), spacing error behind the walking person <= 5.6 deg; on the paper's path with trees
-    (K = 3, 5, 8) mean spacing error 3.4-5.1 deg and tree clearance >= 1.08 m.
-
-    gain: G of the angular (active-tracking) field, the original's 50.
-    f_max_mps2: clamp on the norm of the total input (eq. 14); above the input authority (3 m/s^2 per axis) so
-        that a close teammate or trunk wins over the MPC, as the guarantee (eq. 15) asks.
-    freeze_fraction: the field's argument z rises linearly from (pi/2) * freeze_fraction at d_min to pi/2 at
-        d_max and is held below d_min (METHOD.md's eps freeze): F is finite, saturated below d_min and
-        strictly decreasing above. 0.2 rather than 0.1 halves the slope near d_min (10 Hz control of a
-        squeezed pair).
-
-    tracking_c: c of eq. 10. 1 instead of the paper's 0.1 so that the force on the circle is not ten times
-        weaker than off it (the later original code also raised it to 1).
-    tracking_min_fraction: the angular field's d_min as a fraction of its d_max = 2 pi / K. The original's
-        d_min = 1 rad^2 on the squared angle inverts the thresholds for K >= 7; a fraction keeps
-        d_min < 2 pi / K for every K. Near d_max the field decays like (d_max - d)^3 / D^4
-        (D = d_max - d_min), which stalled the prototype 10-50 deg short (Pitfall 3); 0.7 makes it steep:
-        K = 2 then converges in 13 s instead of 21 s (0.5), and the final error is 0.1-1.3 deg instead of
-        0.7-3.4 deg.
-    tracking_max_mps2: clamp on the norm of the active-tracking sum (eq. 11), below the input authority
-        (Pitfall 2). With the pass-through reference the MAV slides round the circle at about this value
-        in m/s (the MPC's velocity damping is about 1 1/s): fast enough for every K, slow enough that
-        neighbours never meet at speed.
-
-    teammate_d_min_m: d_min of eq. 15 = e_max + v_max dt (1 m way-point tracking error + 5 m/s * 0.1 s).
-    teammate_d_max_base_m: d_max for a fresh plan and zero covariances; eq. 15 adds both MAVs' covariance
-        radii (square root of the largest eigenvalue of the
-        horizontal block) and teammate_speed_mps * (message age -
-        teammate_age_grace_s). With the default 0.25 m^2 covariances a fresh d_max is 3.0 m, below the 3.12 m
-        chord of 16 MAVs on an 8 m circle, so a finished formation feels no repulsion.
-    teammate_speed_mps: |v_max| of eq. 15, growing d_max with the plan's age.
-    covariance_radius_cap_m: largest covariance radius eq. 15 adds per MAV, so that a teammate reporting an
-        absurd covariance is avoided widely but does not repel us from the whole arena.
-    teammate_age_grace_s: plans are aligned to our clock by their stamp, so only age beyond one publish period
-        is uncertain.
-    teammate_peak_mps2, obstacle_peak_mps2, person_peak_mps2: the repulsion fields' value at (and below)
-        d_min; the paper clamps them to F_max there. Their gain follows from the peak (`peak_gain`): with the
-        original G = 50 the teammate field reached 8 m/s^2 already 0.7 m outside d_min, and a MAV squeezed
-        between two neighbours (2 m apart at the start) was shot out at 4-5 m/s into the next one.
-
-    obstacle_d_min_m, obstacle_d_max_m: thresholds of eq. 13 on the distance to the cylinder's SURFACE
-        (distance to the axis minus the radius), so thick and thin trunks keep the same clearance.
-    obstacle_brake_mps2, obstacle_brake_margin_max_m: eq. 15's guarantee d_min = e_max + |v_max| dt holds
-        for the follower's lag at cruise speed only. A MAV closing on a trunk at speed v is stopped by the
-        vehicle, not by the plan: the way-point follower realises the plan's braking late (about 2 m/s^2 of
-        the field's 8 measured in the simulator), so it overshoots the plan by its braking distance. Both
-        thresholds are moved out by that distance, v_close^2 / (2 obstacle_brake_mps2) (capped), v_close
-        the velocity towards the axis at each step: zero for a MAV sliding round a trunk, 2.9 m at 3.4 m/s
-        head-on. Without it a MAV catching up at 2.9 m/s (K = 8, all messages lost) grazed a trunk (clearance
-        -0.01 m).
-    obstacle_slide, slide_max_mps2: a tree on the circle blocks a MAV sliding along it with a purely
-        tangential push (a local minimum that the approach-angle input does not address); obstacle_slide times
-        the tangential part of each repulsion also pushes the MAV radially around the trunk, the sum clamped
-        at slide_max_mps2. Without it the prototype's MAVs stayed stuck between two trees 61 deg apart
-        (spacing error 140 deg, K = 3).
-
-    person_d_min_fraction, person_d_max_fraction: the person as an obstacle, thresholds as fractions of d_des
-        (METHOD.md: 7 m and 8 m for d_des = 8 m).
-
-    approach_range_m: an obstacle whose surface is closer than this to the MAV and that lies inside the MAV's
-        radius about the person (between the MAV and the person, with its clearance) steers the approach
-        angle.
-    approach_angle_rad: d_max of the approach-angle field, an angular difference about the person.
-    approach_max_mps2: clamp of the approach-angle sum. At 2 m/s^2 (above tracking_max_mps2) it overrode the
-        spacing near trees (K = 3 on the paper's path: mean spacing error 21 deg vs 5 deg at 1).
-
-    dqmpc_d_min_m, dqmpc_d_max_m: the DQMPC baseline's repulsion thresholds (METHOD.md "Baselines").
+    gain: G of the angular field; f_max_mps2: F_max, the clamp on the norm of the total (eq. 14);
+    freeze_fraction: F's argument z starts at (pi/2) * freeze_fraction at d_min
+        (docs/method.md#cotangential-field).
+    tracking_c: c of eq. 10; tracking_min_fraction: the angular d_min as a fraction of d_max = 2 pi / K;
+    tracking_max_mps2: clamp on the norm of the active-tracking sum (eq. 11).
+    teammate_d_min_m: d_min of eq. 15; teammate_d_max_base_m: d_max of a fresh plan with zero covariances, to
+        which `teammate_paths` adds both covariance radii (each at most covariance_radius_cap_m) and
+        teammate_speed_mps times the plan's age beyond teammate_age_grace_s.
+    teammate_peak_mps2, obstacle_peak_mps2, person_peak_mps2: each repulsion's value at (and below) its d_min.
+    obstacle_d_min_m, obstacle_d_max_m: eq. 13's thresholds on the distance to a cylinder's surface, moved out
+        by the braking distance v_close^2 / (2 obstacle_brake_mps2), at most obstacle_brake_margin_max_m.
+    obstacle_slide, slide_max_mps2: gain and clamp of the radial slide round a trunk.
+    person_d_min_fraction, person_d_max_fraction: the person's thresholds as fractions of d_des.
+    approach_range_m, approach_angle_rad, approach_max_mps2: reach, angular d_max and clamp of the
+        approach-angle input.
+    dqmpc_d_min_m, dqmpc_d_max_m: the dqmpc baseline's repulsion thresholds.
     """
 
     gain: float = 50.0
@@ -151,7 +96,7 @@ class FieldParams:
 
 @dataclass(frozen=True)
 class FieldTerms:
-    """Which external inputs a method uses (METHOD.md "Baselines").
+    """Which external inputs a method uses (docs/method.md#baselines).
 
     active: every term. dqmpc: teammate and obstacle repulsion only, with its own thresholds. price: none
     inside the MPC (its repulsion is applied after the MPC, see baselines.py).
@@ -250,7 +195,7 @@ class ExternalInputs:
 
 # --------------------------------------------------------------------------------------------- field shape
 def cotangential_magnitude(d, *, d_min, d_max, gain, freeze_fraction: float = 0.2):
-    """Cotangential field magnitude F(d) (paper Sec. III-E; METHOD.md "Potential-field magnitude").
+    """Cotangential field magnitude F(d) (docs/method.md#cotangential-field).
 
     F(d) = G (pi/2) / D * (cot z + z - pi/2) with D = d_max - d_min and z rising linearly from
     z0 = (pi/2) * freeze_fraction at d = d_min to pi/2 at d = d_max. So F(d_max) = 0 and F = 0 beyond, F is
@@ -336,11 +281,10 @@ def _aligned(
 
 def covariance_radius_m(cov_m2: np.ndarray) -> float | np.ndarray:
     """Horizontal radius of a position covariance for eq. 15: the square root of the largest eigenvalue of
-    its horizontal (x, y) 2x2 block (m).
+    its horizontal (x, y) 2x2 block (m), horizontal because every force is
+    (docs/method.md#avoidance-guarantee).
 
-    Every force is horizontal, so the vertical variance (an honest GPS reports ~1 m^2 against 0.25 m^2
-    horizontally) must not widen the horizontal keep-out: with the full 3-D eigenvalue a K = 16 formation's
-    d_max exceeded its 3.1 m neighbour gap. cov_m2: (3, 3) or (2, 2), or (J, 3, 3) for J radii at once.
+    cov_m2: (3, 3) or (2, 2), or (J, 3, 3) for J radii at once.
     """
     cov = np.asarray(cov_m2, dtype=float)[..., :2, :2]
     a, b, c = cov[..., 0, 0], 0.5 * (cov[..., 0, 1] + cov[..., 1, 0]), cov[..., 1, 1]
@@ -423,11 +367,6 @@ def _away(diff_xy: np.ndarray, dist: np.ndarray, tie_sign) -> np.ndarray:
     return unit
 
 
-def _wrap(angle: np.ndarray) -> np.ndarray:
-    """Wrap angles to [-pi, pi)."""
-    return (angle + np.pi) % TWO_PI - np.pi
-
-
 def tracking_inputs(
     *,
     rel_xy: np.ndarray,
@@ -452,7 +391,7 @@ def tracking_inputs(
         return np.zeros_like(rel_xy)
     gamma = np.arctan2(rel_xy[:, 1], rel_xy[:, 0])
     gamma_j = np.arctan2(mates_rel_xy[..., 1], mates_rel_xy[..., 0])
-    signed = _wrap(gamma[None, :] - gamma_j)
+    signed = wrap_angle(gamma[None, :] - gamma_j)
     d_max = TWO_PI / team_size
     delta = np.abs(signed)
     within = (delta < d_max).any(axis=1)  # only teammates closer than 2 pi / K at some step push
@@ -474,7 +413,14 @@ def tracking_inputs(
 
 
 def repulsion_inputs(
-    *, diff_xy: np.ndarray, dist: np.ndarray, d_min, d_max, peak: float, params: FieldParams, tie_sign=1.0
+    *,
+    diff_xy: np.ndarray,
+    dist: np.ndarray,
+    d_min: float,
+    d_max: float | np.ndarray,
+    peak: float,
+    params: FieldParams,
+    tie_sign: float | np.ndarray = 1.0,
 ) -> np.ndarray:
     """Sum over the first axis of cotangential repulsions F(dist) along diff_xy (eq. 12), (N+1, 2).
 
@@ -486,11 +432,13 @@ def repulsion_inputs(
     if not within.any():
         return np.zeros(diff_xy.shape[1:])
     diff_xy, dist = diff_xy[within], dist[within]
-    d_max = d_max[within] if np.ndim(d_max) == 2 else d_max
-    tie_sign = tie_sign[within] if np.ndim(tie_sign) == 2 else tie_sign
+    d_max = d_max[within] if isinstance(d_max, np.ndarray) and d_max.ndim == 2 else d_max
+    tie_sign = tie_sign[within] if isinstance(tie_sign, np.ndarray) and tie_sign.ndim == 2 else tie_sign
     gain = peak_gain(peak, d_min=d_min, d_max=d_max, freeze_fraction=params.freeze_fraction)
-    mag = cotangential_magnitude(
-        dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction
+    mag = np.asarray(
+        cotangential_magnitude(
+            dist, d_min=d_min, d_max=d_max, gain=gain, freeze_fraction=params.freeze_fraction
+        )
     )
     norm = np.sqrt(np.einsum("...i,...i->...", diff_xy, diff_xy))
     return (mag[..., None] * _away(diff_xy, norm, tie_sign)).sum(axis=0)
@@ -577,13 +525,9 @@ def away_from_trunks(
 ) -> np.ndarray:
     """The person's repulsion (N+1, 2) without its components towards trunks within reach_m of the MAV.
 
-    The person's keep-out (7 m) is a comfort distance, a trunk is a collision: a MAV squeezed between a
-    walking person and a trunk was pushed by the person's field (8 m/s^2, as strong as the trunk's) through
-    the trunk at 2.5 m/s (K = 8, seed 2: clearance 0.01 m). Each cylinder the MAV is beside (below its top)
-    with its surface closer than reach_m (the trunk's d_min, where its own field is at its peak) removes the
-    part of the force that points at its axis. Removing it already from the trunk's d_max on, or turning it
-    along the trunk's tangent, measured worse for K = 3 on the paper's path (seed 1: spacing error 11.8 and
-    14.1 deg vs 9.1).
+    The person's keep-out is a comfort distance, a trunk a collision (docs/method.md#the-person): each
+    cylinder the MAV is beside (below its top) with its surface closer than reach_m removes the part of the
+    force that points at its axis.
     """
     out = force_xy.copy()
     diff = obstacles.centers_m[:, None, :] - own_xy[None]  # (M, N+1, 2) from us to each axis
@@ -620,7 +564,7 @@ def approach_inputs(
     obs_rel = obstacles.centers_m[:, None, :] - person_xy[None]
     gamma_m = np.arctan2(obs_rel[..., 1], obs_rel[..., 0])
     gamma = np.arctan2(rel_xy[:, 1], rel_xy[:, 0])
-    signed = _wrap(gamma[None, :] - gamma_m)
+    signed = wrap_angle(gamma[None, :] - gamma_m)
     mag = cotangential_magnitude(
         np.abs(signed),
         d_min=0.0,
@@ -663,8 +607,9 @@ def external_inputs(
     braking margin (FieldParams.obstacle_brake_mps2; not for the dqmpc thresholds).
 
     total = clamp_{f_max}(clamp_{tracking_max}(f_act) + f_dyn + f_sta + f_person +
-    clamp_{approach_max}(f_ang)): METHOD.md Pitfall 2, the tangential steering terms are clamped below the
-    input authority on their own, the safety terms only by the total clamp (eq. 14); f_person never points
+    clamp_{approach_max}(f_ang)): the tangential steering terms are clamped below the
+    input authority on their own (docs/method.md#runaway-off-the-circle), the safety terms only by the total
+    clamp (eq. 14); f_person never points
     at a trunk within obstacle_d_min_m (`away_from_trunks`). A non-finite total becomes zero with
     fault=True.
     """

@@ -1,13 +1,13 @@
 """One MAV's formation controller: person estimate, teammates' plans and obstacles in; horizon plan and
 way-point out.
 
-Per step (paper Sec. III, DESIGN.md "One MAV's loop", steps 3-4): check every input; start from the previous
+Per step (paper Sec. III, docs/architecture.md#one-control-tick): check every input; start from the previous
 plan's state at `now` on a leash to the measured state (reference.py); compute the external inputs f(0..N)
 on the previous plan (fields.py); aim at the terminal reference moved by what the inputs add (pass-through);
 solve the MPC (mpc.py); publish the plan; send its state `waypoint_step` ahead with the yaw facing the person.
 
-Methods (METHOD.md "Baselines"): `active` (every input), `dqmpc` (teammate and obstacle repulsion only, with
-its thresholds 1 m / 4 m), `price` (MPC to the d_des circle point with zero terminal velocity, weights
+Methods (docs/method.md#baselines): `active` (every input), `dqmpc` (teammate and obstacle repulsion only,
+with its thresholds 1 m / 4 m), `price` (MPC to the d_des circle point with zero terminal velocity, weights
 1000 / 0.1, no inputs in the MPC, a field added after it, teammates' current positions only; baselines.py).
 
 Bad input never raises and never yields a NaN way-point: a non-finite (or absurdly large) own state, person
@@ -189,8 +189,8 @@ class FormationController:
         if price:
             f_total = np.zeros((self._steps, 3))
         else:
-            f_total = self._inputs(tick, mates, obstacle_set, formation)
-        target, target_v = self._target(tick, f_total, formation, preferred_bearing_rad, price)
+            f_total = self._inputs(tick, person, mates, obstacle_set, formation)
+        target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
 
         sol = self._mpc.solve(
             position_m=start_p,
@@ -286,7 +286,7 @@ class FormationController:
                 reference_velocity_mps=ref_v,
                 params=self._params.reference,
             )
-        if ref_p is not None:
+        if ref_p is not None and ref_v is not None:
             return ref_p, ref_v
         mp = self._mpc_params
         if self._last_position is not None:
@@ -328,15 +328,20 @@ class FormationController:
         return self._obstacle_set
 
     def _own_cov_radius(self, own: VehicleState) -> float:
-        """Eq. 17's r_sigma of our own covariance (cached: it rarely changes)."""
+        """Eq. 15's r_sigma of our own covariance (cached: it rarely changes)."""
         key = own.position_cov_m2.tobytes()
         if key != self._cov_key:
             cov = np.asarray(own.position_cov_m2, dtype=float)
-            self._cov_key, self._cov_radius = key, (covariance_radius_m(cov) if _finite(cov) else 0.0)
+            self._cov_key, self._cov_radius = key, (float(covariance_radius_m(cov)) if _finite(cov) else 0.0)
         return self._cov_radius
 
     def _inputs(
-        self, tick: _Tick, mates: TeammatePaths, obstacle_set: ObstacleSet, formation: FormationParams
+        self,
+        tick: _Tick,
+        person: PersonEstimate,
+        mates: TeammatePaths,
+        obstacle_set: ObstacleSet,
+        formation: FormationParams,
     ) -> np.ndarray:
         """(N+1, 3) clamped external inputs on the previous plan, moved to begin at the start state."""
         prm = self._params
@@ -351,9 +356,9 @@ class FormationController:
         # The braking margin needs the vehicle's velocity, not the plan's: the follower lags the plan.
         measured_v = np.asarray(tick.own.velocity_mps, dtype=float)
         own_vel = own_vel + ((measured_v if _finite(measured_v) else tick.start_v) - own_vel[0])
-        person_p = np.asarray(tick.person.position_m, dtype=float)
+        person_p = np.asarray(person.position_m, dtype=float)
         if prm.reference.predict_person:
-            person_v = np.asarray(tick.person.velocity_mps, dtype=float)
+            person_v = np.asarray(person.velocity_mps, dtype=float)
             person_p = person_p + person_v * (dt * np.arange(self._steps)[:, None])
         ext = external_inputs(
             own_positions_m=own_path,
@@ -375,6 +380,7 @@ class FormationController:
     def _target(
         self,
         tick: _Tick,
+        person: PersonEstimate,
         f_total: np.ndarray,
         formation: FormationParams,
         preferred_bearing_rad: float | None,
@@ -386,8 +392,8 @@ class FormationController:
         """
         mp = self._mpc_params
         ref = self._params.reference
-        person_p = np.asarray(tick.person.position_m, dtype=float)
-        person_v = np.zeros(3) if price else np.asarray(tick.person.velocity_mps, dtype=float)
+        person_p = np.asarray(person.position_m, dtype=float)
+        person_v = np.zeros(3) if price else np.asarray(person.velocity_mps, dtype=float)
         target, target_v = terminal_reference(
             position_m=tick.start_p,
             person_position_m=person_p,

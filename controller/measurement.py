@@ -52,7 +52,7 @@ COV_FLOOR_M2 = 1e-9
 
 @dataclass(frozen=True)
 class NoiseParams:
-    """Detection noise in spherical coordinates about the camera (METHOD.md "Measurement model").
+    """Detection noise in spherical coordinates about the camera (docs/method.md#measurement-model).
 
     sigma_r^2 = (range_sigma_fraction * r)^2, i.e. C1 = range_sigma_fraction^2; bearing (azimuth) and
     inclination standard deviations are constant, in radians.

@@ -15,19 +15,10 @@ with c(n) = g ("hover"), f(n) + g ("planned") or 0 ("raw").
 
 Condensed form: the variables are z = [u(0..N) (N+1, 3) | s (6,)] and the states are affine in them,
 x(1..N+1) = h + G u, with h the free response to x(0) and f + g (`predict` with u = 0) and G the
-(6(N+1), 3(N+1)) input-to-state matrix. Measured against the sparse form (states as variables, 150
-variables) on 60 random instances: the sparse form costs less per iteration (4.5 vs 6 us) and re-factorises
-faster after a terminal-weight change (57 vs 87-120 us), but ADMM converges 2-4x slower on it when state
-bounds are active (cold: 90th percentile 1081 vs 560 iterations, 2 of 60 hit the 4000 cap; the condensed
-form solved all within 1625), and warm-started in closed loop it takes 25 iterations against 15.
-Robustness decided.
-
-State bounds are soft because a strong external input can make them infeasible (METHOD.md, pitfall 1). Slack
-layout: one slack per state component (x, y, z, vx, vy, vz) shared over the horizon, an L-infinity penalty:
-6 extra variables instead of 96, and exact (the plan equals the hard-bounded one whenever that exists) as long
-as slack_weight exceeds the summed multipliers of the component's bound rows. The quadratic slack term does
-not change that (its slope at s = 0 is zero) but gives OSQP curvature in s: with a purely linear penalty a
-cold solve took about 1100 iterations even with no bound active, with it about 200.
+(6(N+1), 3(N+1)) input-to-state matrix; chosen over the sparse form because ADMM converged faster and more
+reliably on it (docs/method.md#condensed-form). State bounds are soft, with one slack per state component
+shared over the horizon and an exact penalty, because a strong external input can make them infeasible
+(docs/method.md#soft-state-bounds, docs/method.md#infeasible-qps).
 """
 
 from __future__ import annotations
@@ -47,7 +38,7 @@ PLAUSIBLE_MAGNITUDE = 1.0e6
 
 @dataclass(frozen=True)
 class MpcParams:
-    """MPC horizon, bounds and weights (METHOD.md "The MPC"). ENU, z up.
+    """MPC horizon, bounds and weights (docs/method.md#the-mpc). ENU, z up.
 
     horizon_steps: N (inputs u(0..N), states x(1..N+1)); dt_s: step length.
     Bounds are per axis (x, y, z). input_*_mps2 bound the commanded acceleration u *before* gravity is added
@@ -244,6 +235,7 @@ class ModelPredictiveController:
         self._free_x0, self._input_to_state = self._prediction_matrices()
         self._g_terminal = self._input_to_state[-6:]
         self._a_matrix = self._build_constraints()
+        self._n_constraints = self._nu + 12 * m + 6  # rows of _a_matrix (see _build_constraints)
         self._upper_rows = slice(self._nu, self._nu + 6 * m)  # rows of G u - s <= x_max - h
         self._lower_rows = slice(self._nu + 6 * m, self._nu + 12 * m)  # rows of G u + s >= x_min - h
         self._l_template, self._u_template = self._constant_bounds()
@@ -485,7 +477,7 @@ class ModelPredictiveController:
         accepted = ACCEPTED_STATUSES if prm.accept_inaccurate else ACCEPTED_STATUSES[:1]
         if status not in accepted or not (np.all(np.isfinite(result.x)) and np.all(np.isfinite(result.y))):
             self._warm = None
-            self._solver.warm_start(x=np.zeros(self._n_var), y=np.zeros(self._a_matrix.shape[0]))
+            self._solver.warm_start(x=np.zeros(self._n_var), y=np.zeros(self._n_constraints))
             message = f"OSQP: {status} after {iterations} iterations"
             return self._failure(status, message, iterations, run_time)
 

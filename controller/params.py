@@ -17,9 +17,23 @@ from controller.mpc import MpcParams
 from controller.reference import ReferenceParams
 from controller.tracker import TrackerParams
 
+MAX_TEAM_SIZE = 16
+"""The largest team the controller is tuned and tested for (K = 2..16). At the paper's d_des = 8 m the ring of
+16 MAVs leaves 3.12 m between neighbours, just outside a fresh teammate-repulsion d_max of 3.0 m; a 17th MAV
+would put the finished formation inside it (docs/method.md#avoidance-guarantee)."""
+
+
+class ParameterError(ValueError):
+    """A parameter out of its range: `field` names it, `reason` says what is allowed and what was given."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field} {reason}")
+        self.field = field
+        self.reason = reason
+
 
 class Method(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports
-    """Formation method: the paper's (`active`) or one of its two baselines (METHOD.md "Baselines")."""
+    """Formation method: the paper's (`active`) or one of its two baselines (docs/method.md#baselines)."""
 
     ACTIVE = "active"
     DQMPC = "dqmpc"
@@ -40,7 +54,7 @@ class FormationParams:
 
 @dataclass(frozen=True)
 class ControllerParams:
-    """Everything one MAV's controller needs, with the defaults of METHOD.md."""
+    """Everything one MAV's controller needs, with the defaults of docs/method.md."""
 
     method: Method = Method.ACTIVE
     mpc: MpcParams = field(default_factory=MpcParams)

@@ -1,30 +1,16 @@
 """Where the MPC starts, where it aims, and which of its states becomes the way-point.
 
-The paper's terminal reference (eq. `cost`): the point at horizontal distance d_des from the person along
-the person->MAV bearing, h_des above the person, with the person's velocity (vertical 0). Three choices here
-were made by measurement in closed loop (tests/controller/test_closed_loop.py; prototype numbers below):
+The paper's terminal reference (eq. 4): the point at horizontal distance d_des from the person along the
+person->MAV bearing, h_des above the person, with the person's velocity (vertical 0). Three choices were made
+by measurement in closed loop (docs/method.md#terminal-reference-and-way-point):
 
-1. Pass-through of the external inputs. With the paper's weights the MPC cancels most of any external
-   input: for a constant tangential f it applies u(0) = -0.92 f (the creep of METHOD.md Pitfall 5, 0.16 m/s
-   round the circle), and it counters inputs predicted late in the horizon by accelerating towards their
-   source now, a negative damping. Lowering the tangential weights (Pitfall 5's remedy) left the formation
-   weakly damped: with weights 50 / 10, MAVs of K = 8..16 squeezed together at the start oscillated into
-   each other (0.02-0.1 m). Instead, the terminal reference is moved by the displacement and velocity that
-   the inputs f(0..N) alone add over the horizon (`input_displacement`): the MPC then plans exactly as it
-   would without inputs (the system is linear) and the inputs act on top as free accelerations, while the
-   paper's full weights keep every direction well damped (velocity time constant about 1 s). The inputs
-   stay in the plan that teammates see.
-2. Planning from the reference state. Re-planned from the measured state while a PX4-like cascade
-   (position gain 0.95, velocity gain 1.8, attitude lag 0.15 s) follows way-point x(1), the MPC's plan was
-   realised at only about 20 % of its acceleration: a lone MAV's distance error still swung between 0.5 and
-   1.7 m after 60 s, and 3 MAVs ended 2.2 m off the circle. So the plan starts from the previous plan's
-   state at `now` (what the autopilot is tracking) while the measured state is within the leash
-   (`leash_position_m`, `leash_velocity_mps`); beyond it the start is pulled onto the leash towards the
-   measurement. With it the lone MAV settles in 7.5 s and the 3 in 16 s. The guarantee (eq. 15) already
-   budgets this tracking error as e_max.
-3. Way-point: the plan's state `waypoint_step` steps ahead. Step 1 (0.1 s) is stable with the cascade
-   above; steps 2 and more put the position set-point ahead of the vehicle by v k dt, which the cascade's
-   position gain turns into positive velocity feedback: the prototype diverged to thousands of metres.
+1. pass-through: the terminal reference is moved by what the external inputs alone add over the horizon
+   (`input_displacement`), so the MPC no longer cancels them and the paper's weights keep every direction
+   damped;
+2. the plan starts from the previous plan's state at `now` while the measured state is within a leash
+   (`initial_state`), because the autopilot tracks that plan, not the measurement;
+3. the way-point is the plan's state one step ahead: further ahead, the autopilot's position gain turns the
+   lead into positive velocity feedback.
 
 All functions are pure; arrays are ENU, metres, seconds.
 """
@@ -38,15 +24,14 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ReferenceParams:
-    """Choices of the formation controller's reference (see the module docstring for the measurements).
+    """Choices of the formation controller's reference (docs/method.md#terminal-reference-and-way-point).
 
     waypoint_step: which plan state x(k), v(k) is sent to the autopilot (1..N+1).
     leash_position_m, leash_velocity_mps: how far the measured state may be from the previous plan's state at
         `now` before the plan is re-anchored towards the measurement (0 = always plan from the measurement).
     pass_through: move the terminal reference by what the external inputs add over the horizon (see 1. above).
     predict_person: aim at the person's constant-velocity prediction at the horizon end (N+1) dt ahead instead
-        of the current estimate; with a person walking at 1 m/s the MAVs otherwise trail the desired circle by
-        about 1.6 m (prototype: distance error 1.65 m max vs 0.28 m).
+        of the current estimate (else the MAVs trail a walking person's circle).
     """
 
     waypoint_step: int = 1

@@ -3,15 +3,12 @@
 Every MAV fuses its own and its teammates' world-frame detections, each with its own covariance
 (measurement.py), in a linear Kalman filter (filterpy) on x = [p (3), v (3)] (ENU, m and m/s).
 
-Motion model (METHOD.md, from the authors' original): the velocity decays exponentially, to
+Motion model (docs/method.md#person-tracker, from the authors' code): the velocity decays exponentially, to
 `velocity_decay_fraction` of itself over `velocity_decay_time_s` (time constant tau = T / ln(1 / fraction),
-1.30 s by default), driven by white noise (an Ornstein-Uhlenbeck velocity). The noise is given as a standard
-deviation per square-root second, sigma_q (m/s/sqrt(s)): over a short dt the velocity's variance grows by
-sigma_q^2 dt (spectral density q = sigma_q^2, m^2/s^3). The original's "(0.5, 0.5, 0.1) per second" read as
-sigma_q is consistent: over 100 Monte-Carlo runs (seeds 100-199) of the walking person of
-tests/controller/test_tracker.py (2200 samples) the average position NEES is 2.96, inside its 95 % interval
-[2.90, 3.10]; read as variances (q = 0.5) it is 2.58, too cautious. On perfectly flat ground the vertical
-part is over-cautious (the model lets the person climb): 2.85 overall there.
+1.30 s by default), driven by white noise given as a standard deviation per square-root second, sigma_q
+(m/s/sqrt(s)): over a short dt the velocity's variance grows by sigma_q^2 dt (spectral density q = sigma_q^2,
+m^2/s^3). Read that way the authors' "(0.5, 0.5, 0.1) per second" is consistent (average NEES in its 95 %
+interval, tests/controller/test_tracker.py).
 
 Exact discretisation over dt, per axis, with b = exp(-dt / tau):
 
@@ -46,7 +43,7 @@ from controller.messages import Detection, PersonEstimate
 
 @dataclass(frozen=True)
 class TrackerParams:
-    """Motion model, gating and reset of the person tracker (METHOD.md "Person tracker").
+    """Motion model, gating and reset of the person tracker (docs/method.md#person-tracker).
 
     gate_sigma: Mahalanobis distance (3 dof, in sigmas) beyond which a detection is rejected;
     reset_after_s: the track expires after this long without an accepted detection;
@@ -238,14 +235,17 @@ class PersonTracker:
         """Gate a detection that belongs before cache[index] and, if it passes, re-filter from there."""
         cache = self._cache
         following = cache[index]
-        x, P = following.x_before, following.P_before
-        if key[0] > following.t_before:
-            F, Q = self._fq(key[0] - following.t_before)
+        t_before, x_before, P_before = following.t_before, following.x_before, following.P_before
+        if t_before is None or x_before is None or P_before is None:  # the track's first detection
+            return Verdict.STALE
+        x, P = x_before, P_before
+        if key[0] > t_before:
+            F, Q = self._fq(key[0] - t_before)
             x, P = F @ x, F @ P @ F.T + Q
         if not self._within_gate(x, P, z, R):
             return Verdict.GATED
-        self._t = following.t_before
-        self._kf.x, self._kf.P = following.x_before.copy(), following.P_before.copy()
+        self._t = t_before
+        self._kf.x, self._kf.P = x_before.copy(), P_before.copy()
         cache.insert(index, _Entry(key, z, R))
         replay = cache[index:]
         del cache[index:]
@@ -263,7 +263,7 @@ class PersonTracker:
             del self._cache[0]
 
     def _predict_to(self, t_s: float) -> None:
-        if t_s > self._t:
+        if self._t is not None and t_s > self._t:
             F, Q = self._fq(t_s - self._t)
             self._kf.predict(F=F, Q=Q)
             self._t = t_s

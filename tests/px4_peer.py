@@ -236,7 +236,8 @@ class Px4Peer:
         start = np.array(start_ned_m, dtype=float)
         if origin is not None:
             # home is given explicitly: place the vehicle there in the origin's frame
-            n, e, d = pymap3d.geodetic2ned(*home, *self.origin)
+            lat0, lon0, alt0 = self.origin
+            n, e, d = pymap3d.geodetic2ned(home[0], home[1], home[2], lat0, lon0, alt0)
             start = np.array([n, e, d], dtype=float)
         self._ground_down_m = float(start[2])
         self._p = start
@@ -745,7 +746,9 @@ class Px4Peer:
             int(round(lat * 1e7)),
             int(round(lon * 1e7)),
             int(round(alt * 1e3)),
-            *self._home_ned,
+            float(self._home_ned[0]),
+            float(self._home_ned[1]),
+            float(self._home_ned[2]),
             [1.0, 0.0, 0.0, 0.0],
             0.0,
             0.0,

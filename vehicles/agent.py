@@ -1,4 +1,4 @@
-"""One MAV's onboard loop (DESIGN.md "One MAV's loop"), as a plain object driven by any runner.
+"""One MAV's onboard loop (docs/architecture.md#one-control-tick), as a plain object driven by any runner.
 
 Per tick: fuse the MAV's own new detections and the teammates' received ones in its person-tracker replica,
 keep the teammates' latest horizon plans, run the formation controller on the MAV's own reported state, and
@@ -6,13 +6,10 @@ return the set-point (position, velocity, yaw) plus the messages to broadcast (i
 its detections at once). No clocks, no I/O: the deterministic simulation and the live ground station drive the
 same `tick(now_s, inputs) -> outputs`.
 
-Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`. The roster (from the ground
-station: every in-formation MAV with its slot bearing 2 pi k / K about the person) stands in for what the
-link no longer carries. For every unheard teammate the agent passes the controller a *phantom* plan at that
-teammate's slot (about this MAV's own person estimate, moving with the person), and it asks the controller for
-its own slot bearing as the terminal reference. So a team that cannot talk still spreads out, and a MAV pushed
-out of its slot by a trunk is pushed back by its neighbours' phantoms before it reaches them: without any
-message, the slots are all a MAV can know about where its teammates are.
+Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`; an unheard teammate is stood in
+for by a *phantom* plan at its roster slot (2 pi k / K about this MAV's person estimate, moving with the
+person), and this MAV aims at its own slot, so a team that cannot talk still spreads out
+(docs/method.md#beyond-the-paper-the-team-without-its-links).
 
 Re-planning rate: by default the MPC is solved every control tick, as in the paper. With `replan_period_s`
 > 0 it is solved at most that often; in between, the set-point follows the latest plan (its state
@@ -32,6 +29,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from controller.angles import wrap_angle
 from controller.formation import FormationController
 from controller.messages import (
     ControlOutput,
@@ -133,6 +131,17 @@ class AgentOutputs:
     camera: ConverterStats | None = None
 
 
+@dataclass(frozen=True, eq=False)
+class _Step:
+    """What one tick decided: the controller's output, the plan stood by, the set-point, a fault."""
+
+    control: ControlOutput | None = None
+    plan: HorizonPlan | None = None
+    setpoint: Setpoint | None = None
+    fault: str | None = None
+    used_slot: bool = False
+
+
 def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: bool = False) -> HorizonPlan:
     """A plan that stays at the MAV's reported position (N+2 copies), for MAVs not under formation control."""
     n = params.mpc.horizon_steps + 2
@@ -186,7 +195,42 @@ class Agent:
         return tuple(p for p in self._sorted_plans if p.stamp_s >= limit)
 
     def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
-        """Run one control tick at now_s."""
+        """Run one control tick at now_s: take in messages, then follow the latest plan, re-plan, or hold."""
+        detections = self._take_in(now_s, inputs)
+        own = inputs.own
+        flying = inputs.role == AgentRole.FORMATION and own is not None
+        last = self._followable(now_s) if flying else None
+        # Between re-plans the estimate of the last re-plan serves (0.1 s old at 10 Hz: a 7 cm walk).
+        person = self._last_person if last is not None else self._tracker.estimate(now_s)
+        self._last_person = person
+        teammates = self.teammate_plans(now_s)
+        known = sum(1 for p in teammates if p.in_formation)
+        step = _Step()
+        if last is not None and person is not None:
+            step = _Step(control=last, plan=last.plan, setpoint=self._follow(now_s, last.plan, person))
+        elif own is not None and inputs.role == AgentRole.FORMATION:
+            step = self._replan(now_s, own, person, teammates, known, inputs)
+        elif own is not None and inputs.role == AgentRole.AIRBORNE:
+            step = _Step(plan=hold_plan(state=own, params=self._params, in_formation=False))
+        return AgentOutputs(
+            stamp_s=now_s,
+            setpoint=step.setpoint,
+            control=step.control,
+            plan=step.plan,
+            person=person,
+            outbox=self._outbox(now_s, detections, step.plan),
+            tracker=self._tracker.stats(),
+            counters=AgentCounters(**self._counts),
+            teammates_known=known,
+            used_slot=step.used_slot,
+            fault=step.fault,
+            camera=self._converter.stats() if self._converter is not None else None,
+        )
+
+    def _take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
+        """Keep teammates' plans, fuse their detections and this MAV's own (the camera's pixel detections
+        converted with the pose at their capture time); count what is rejected. Returns the own world-frame
+        detections of this tick."""
         counts = self._counts
         for msg in inputs.received:
             self._receive(msg)
@@ -203,105 +247,96 @@ class Agent:
                     counts["own_detections_fused"] += 1
             else:
                 counts["rejected_messages"] += 1
-        following = inputs.role == AgentRole.FORMATION and inputs.own is not None and self._can_follow(now_s)
-        # Between re-plans the estimate of the last re-plan serves (0.1 s old at 10 Hz: a 7 cm walk).
-        person = self._last_person if following else self._tracker.estimate(now_s)
-        self._last_person = person
-        teammates = self.teammate_plans(now_s)
-        known = sum(1 for p in teammates if p.in_formation)
-        own = inputs.own
-        setpoint = control = plan = None
-        fault = None
-        used_slot = False
-        if following:
-            control = self._last_control
-            plan = control.plan
-            setpoint = self._follow(now_s, plan, person)
-        elif own is not None and inputs.role == AgentRole.FORMATION:
-            slot = dict(inputs.roster).get(self.vehicle_id)
-            used_slot = slot is not None and known < len(inputs.roster) - 1
-            if used_slot and person is not None:
-                teammates = teammates + self._phantoms(now_s, person, inputs, teammates)
-            try:
-                control = self._controller.step(
-                    now_s=now_s,
-                    own=VehicleState(
-                        vehicle_id=self.vehicle_id,
-                        stamp_s=now_s,
-                        position_m=own.position_m,
-                        velocity_mps=own.velocity_mps,
-                        yaw_rad=own.yaw_rad,
-                        position_cov_m2=own.position_cov_m2,
-                    ),
-                    person=person,
-                    teammates=teammates,
-                    obstacles=inputs.obstacles,
-                    formation=inputs.formation,
-                    in_formation=True,
-                    preferred_bearing_rad=slot if used_slot else None,
-                )
-                yaw = control.yaw_rad
-                if control.status == SolveStatus.NO_PERSON:
-                    yaw = self._search_yaw(now_s, own.yaw_rad)
-                else:
-                    self._search = None
-                setpoint = Setpoint(
-                    stamp_s=now_s,
-                    position_m=control.waypoint_position_m,
-                    velocity_mps=control.waypoint_velocity_mps,
-                    yaw_rad=yaw,
-                )
-                plan = control.plan
-                if control.status == SolveStatus.BRAKING:
-                    counts["braking_ticks"] += 1
-                    fault = control.fault
-            except Exception as exc:  # the loop must survive a controller bug: hold and report it
-                counts["controller_errors"] += 1
-                fault = f"controller error: {type(exc).__name__}: {exc}"
-                control = None
-                plan = hold_plan(state=own, params=self._params, in_formation=True)
-                setpoint = Setpoint(
+        return detections
+
+    def _replan(
+        self,
+        now_s: float,
+        own: AutopilotState,
+        person: PersonEstimate | None,
+        teammates: tuple[HorizonPlan, ...],
+        known: int,
+        inputs: AgentInputs,
+    ) -> _Step:
+        """Solve the formation controller; steer to the roster slot when teammates are unheard."""
+        counts = self._counts
+        slot = dict(inputs.roster).get(self.vehicle_id)
+        used_slot = slot is not None and known < len(inputs.roster) - 1
+        if used_slot and person is not None:
+            teammates = teammates + self._phantoms(now_s, person, inputs, teammates)
+        if used_slot:
+            counts["slot_ticks"] += 1
+        try:
+            control = self._controller.step(
+                now_s=now_s,
+                own=VehicleState(
+                    vehicle_id=self.vehicle_id,
                     stamp_s=now_s,
                     position_m=own.position_m,
-                    velocity_mps=(0.0, 0.0, 0.0),
+                    velocity_mps=own.velocity_mps,
                     yaw_rad=own.yaw_rad,
-                )
-            if used_slot:
-                counts["slot_ticks"] += 1
-            self._last_control = control
-        elif own is not None and inputs.role == AgentRole.AIRBORNE:
-            plan = hold_plan(state=own, params=self._params, in_formation=False)
+                    position_cov_m2=own.position_cov_m2,
+                ),
+                person=person,
+                teammates=teammates,
+                obstacles=inputs.obstacles,
+                formation=inputs.formation,
+                in_formation=True,
+                preferred_bearing_rad=slot if used_slot else None,
+            )
+        except Exception as exc:  # the loop must survive a controller bug: hold and report it
+            counts["controller_errors"] += 1
+            self._last_control = None
+            return _Step(
+                plan=hold_plan(state=own, params=self._params, in_formation=True),
+                setpoint=Setpoint(
+                    stamp_s=now_s, position_m=own.position_m, velocity_mps=np.zeros(3), yaw_rad=own.yaw_rad
+                ),
+                fault=f"controller error: {type(exc).__name__}: {exc}",
+                used_slot=used_slot,
+            )
+        self._last_control = control
+        if control.status == SolveStatus.NO_PERSON:
+            yaw = self._search_yaw(now_s, own.yaw_rad)
+        else:
+            self._search = None
+            yaw = control.yaw_rad
+        fault = None
+        if control.status == SolveStatus.BRAKING:
+            counts["braking_ticks"] += 1
+            fault = control.fault
+        setpoint = Setpoint(
+            stamp_s=now_s,
+            position_m=control.waypoint_position_m,
+            velocity_mps=control.waypoint_velocity_mps,
+            yaw_rad=yaw,
+        )
+        return _Step(control=control, plan=control.plan, setpoint=setpoint, fault=fault, used_slot=used_slot)
+
+    def _outbox(
+        self, now_s: float, detections: tuple[Detection, ...], plan: HorizonPlan | None
+    ) -> tuple[Message, ...]:
+        """Own detections at once; the plan at most every plan_period_s."""
         outbox: list[Message] = [
             d for d in detections if isinstance(d, Detection) and d.source_id == self.vehicle_id
         ]
         if plan is not None and now_s - self._last_publish_s >= self._ap.plan_period_s - 1e-9:
             outbox.append(plan)
             self._last_publish_s = now_s
-        return AgentOutputs(
-            stamp_s=now_s,
-            setpoint=setpoint,
-            control=control,
-            plan=plan,
-            person=person,
-            outbox=tuple(outbox),
-            tracker=self._tracker.stats(),
-            counters=AgentCounters(**counts),
-            teammates_known=known,
-            used_slot=used_slot,
-            fault=fault,
-            camera=self._converter.stats() if self._converter is not None else None,
-        )
+        return tuple(outbox)
 
-    def _can_follow(self, now_s: float) -> bool:
-        """True when this tick may follow the latest plan instead of solving the MPC again."""
+    def _followable(self, now_s: float) -> ControlOutput | None:
+        """The latest solved output when this tick may follow its plan instead of solving the MPC again."""
         last = self._last_control
-        return (
+        if (
             self._ap.replan_period_s > 0.0
             and last is not None
             and self._last_person is not None
             and last.status == SolveStatus.SOLVED
             and 0.0 <= now_s - last.plan.stamp_s < self._ap.replan_period_s - 1e-9
-        )
+        ):
+            return last
+        return None
 
     def _follow(self, now_s: float, plan: HorizonPlan, person: PersonEstimate) -> Setpoint:
         """The set-point of a tick between re-plans: the plan's state waypoint_step steps ahead of now."""
@@ -353,7 +388,7 @@ class Agent:
             self._search = (now_s, yaw_rad)
         t0, yaw0 = self._search
         self._search = (now_s, yaw0 + self._ap.search_yaw_rate_radps * (now_s - t0))
-        return (self._search[1] + math.pi) % (2.0 * math.pi) - math.pi
+        return wrap_angle(self._search[1])
 
     def _receive(self, msg: object) -> None:
         counts = self._counts

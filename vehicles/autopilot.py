@@ -96,6 +96,7 @@ class Autopilot(Protocol):
 
     def state(self) -> AutopilotState | None:
         """The latest telemetry, or None before the first reading."""
+        ...
 
     def send_setpoint(self, setpoint: Setpoint) -> None:
         """Follow this set-point (entering offboard if needed and allowed)."""

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from controller.messages import Obstacle
 
@@ -42,13 +43,7 @@ def body_rotation(*, yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0
     yaw_rad: ENU heading; pitch_rad > 0 nose up and roll_rad > 0 right side down (the aviation sense, so the
     numbers mean the same as PX4's): R = Rz(yaw) Ry(-pitch) Rx(roll) for forward-left-up body axes.
     """
-    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
-    cp, sp = math.cos(-pitch_rad), math.sin(-pitch_rad)
-    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
-    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    return rz @ ry @ rx
+    return Rotation.from_euler("ZYX", [yaw_rad, -pitch_rad, roll_rad]).as_matrix()
 
 
 def attitude_from_acceleration(

@@ -29,6 +29,7 @@ class Links(Protocol):
 
     def receive(self, now_s: float, receiver_id: int) -> tuple[Message, ...]:
         """Every message for receiver_id that has arrived by now_s and was not received yet, oldest first."""
+        ...
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ import math
 import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NoReturn
 
 from controller.messages import Obstacle
 from controller.params import ControllerParams, FormationParams
@@ -304,7 +305,7 @@ class Mission:
             raise AssertionError("unreachable")
         return v
 
-    def _refuse(self, message: str) -> None:
+    def _refuse(self, message: str) -> NoReturn:
         self._rejected_actions += 1
         raise MissionError(message)
 

@@ -47,6 +47,7 @@ class PersonModel(Protocol):
 
     def truth(self, t_s: float) -> PersonTruth:
         """The person's true state at t_s."""
+        ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,15 +81,18 @@ class World(Protocol):
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:
         """The static obstacles (tree trunks)."""
+        ...
 
     def advance(self, now_s: float) -> None:
         """Move the world (person, simulated physics, cameras) forward to now_s."""
 
     def detections(self, vehicle_id: int) -> tuple[Detection, ...]:
         """The person detections made by vehicle_id's camera since the last call, oldest first."""
+        ...
 
     def person_truth(self) -> PersonTruth | None:
         """Where the person really is, when the world knows it (simulation); None in the field."""
+        ...
 
 
 class Body(Protocol):
@@ -101,3 +105,4 @@ class Body(Protocol):
 
     def pose(self) -> BodyPose | None:
         """The body's true pose now, or None when unknown."""
+        ...

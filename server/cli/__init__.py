@@ -2,6 +2,8 @@
 
 Commands are registered by (name, "module:function"); the module is imported only when its command runs, so
 `skyring --help` stays fast and a command's heavy imports (viser, filterpy, mavsdk) load only when needed.
+A bad option ends any command with exit status 2 and exactly one line on stderr, "Error: ..." naming the
+option (typer's own error panel takes a dozen lines, too many for a field terminal or a script's log).
 """
 
 from __future__ import annotations
@@ -37,7 +39,14 @@ COMMANDS: dict[str, str] = {
 }
 
 
+_registered: set[str] = set()
+
+
 def _register(name: str, target: str) -> None:
+    """Add command `name` to the app once (main() may run more than once in one process, as in tests)."""
+    if name in _registered:
+        return
+    _registered.add(name)
     module_name, func_name = target.split(":")
     module = importlib.import_module(module_name)
     app.command(name=name)(getattr(module, func_name))
@@ -48,7 +57,16 @@ def main() -> None:
     wanted = [a for a in sys.argv[1:2] if a in COMMANDS]
     for name in wanted or list(COMMANDS):
         _register(name, COMMANDS[name])
-    app()
+    try:
+        code = app(standalone_mode=False)
+    except typer.Abort:
+        typer.echo("Aborted.", err=True)
+        sys.exit(1)
+    except typer.TyperException as exc:  # a usage error: one line, the option named
+        format_message = getattr(exc, "format_message", None)
+        typer.echo(f"Error: {format_message() if format_message else exc}", err=True)
+        sys.exit(getattr(exc, "exit_code", 2))
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

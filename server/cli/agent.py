@@ -248,10 +248,10 @@ async def run_px4_agent(
         loop.add_signal_handler(sig, stop.set)
     try:
         await px4.connect()
-        home = px4.home
-        if reference is None and home is None:
+        team_origin = reference if reference is not None else px4.home
+        if team_origin is None:
             raise Px4Error("no home position to serve as the team origin; pass --origin lat,lon,alt")
-        px4.set_reference(reference or home)
+        px4.set_reference(team_origin)
         px4.use_stamp_clock(time.time)
         px4.start()
     except Px4Error as exc:

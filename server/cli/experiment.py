@@ -10,6 +10,16 @@ from pathlib import Path
 from typing import Annotated, TextIO
 
 import typer
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 
 from server.lab import experiments as exp
 from server.lab import figures
@@ -26,32 +36,56 @@ class Experiment(StrEnum):
     ALL = "all"
 
 
-class TextProgress:
-    """A progress bar on a text stream: redrawn in place on a terminal, else one line per finished run."""
+class RunProgress:
+    """Progress of the runs on a stream: a rich progress bar on a terminal (done/total, failed, elapsed, time
+    left, the last run), one plain line per finished run otherwise (a log file, CI)."""
 
-    def __init__(self, *, total: int, stream: TextIO, width: int = 30) -> None:
+    def __init__(self, *, total: int, stream: TextIO) -> None:
         self.total = total
-        self.stream = stream
-        self.width = width
-        self.start = time.monotonic()
         self.failed = 0
-        self.tty = stream.isatty()
+        self.stream = stream
+        self.start = time.monotonic()
+        self._console = Console(file=stream)
+        self._bar: Progress | None = None
+        self._task: TaskID | None = None
+        if self._console.is_terminal:
+            self._bar = Progress(
+                TextColumn("runs"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[failed]} failed"),
+                TimeElapsedColumn(),
+                TextColumn("~"),
+                TimeRemainingColumn(),
+                TextColumn("{task.fields[last]}"),
+                console=self._console,
+            )
+            self._task = self._bar.add_task("runs", total=total, failed=0, last="")
+
+    def __enter__(self) -> RunProgress:
+        if self._bar is not None:
+            self._bar.start()
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        if self._bar is not None:
+            self._bar.stop()
 
     def __call__(self, done: int, total: int, result: exp.RunResult) -> None:
         self.failed += 0 if result.ok else 1
+        spec = result.spec
+        last = (
+            f"{spec.family} / {spec.condition.name} / run {spec.run_index} {'ok' if result.ok else 'FAILED'}"
+        )
+        if self._bar is not None and self._task is not None:
+            self._bar.update(self._task, completed=done, failed=self.failed, last=last)
+            return
         elapsed = time.monotonic() - self.start
         eta = elapsed / done * (total - done) if done else 0.0
-        filled = self.width * done // max(total, 1)
-        spec = result.spec
-        line = (
-            f"[{'#' * filled}{'.' * (self.width - filled)}] {done}/{total} runs, {self.failed} failed, "
-            f"{_clock(elapsed)} elapsed, ~{_clock(eta)} left | {spec.family} / {spec.condition.name} / "
-            f"run {spec.run_index} {'ok' if result.ok else 'FAILED'}"
+        self.stream.write(
+            f"{done}/{total} runs, {self.failed} failed, {_clock(elapsed)} elapsed, ~{_clock(eta)} left "
+            f"| {last}\n"
         )
-        if self.tty:
-            self.stream.write("\r\033[K" + line + ("\n" if done == total else ""))
-        else:
-            self.stream.write(line + "\n")
         self.stream.flush()
 
 
@@ -129,9 +163,9 @@ def experiment(
     )
 
     start = time.monotonic()
-    progress = TextProgress(total=len(specs), stream=sys.stderr)
     try:
-        results = exp.run_all(specs, jobs=jobs, out_dir=out, resume=resume, progress=progress)
+        with RunProgress(total=len(specs), stream=sys.stderr) as progress:
+            results = exp.run_all(specs, jobs=jobs, out_dir=out, resume=resume, progress=progress)
     except KeyboardInterrupt:
         typer.echo(
             f"\ninterrupted: the finished runs are kept under {out}; add --resume to continue", err=True

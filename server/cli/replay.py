@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, NoReturn
 
 import typer
 
@@ -129,7 +129,7 @@ class ReplayActions:
     def __init__(self, path: Path) -> None:
         self._path = path
 
-    def _refuse(self, *_args: object, **_kwargs: object) -> None:
+    def _refuse(self, *_args: object, **_kwargs: object) -> NoReturn:
         raise ValueError(f"this is a replay of {self._path}: commands do not reach any vehicle")
 
     set_formation = add_obstacle = remove_obstacle = _refuse

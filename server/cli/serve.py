@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -19,59 +18,26 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from controller.params import Method
+from controller.params import Method, ParameterError
+from server.cli.log_options import describe_log, log_header, log_path_option, open_log
+from server.cli.options import OPTION_OF_FIELD, MethodOption, Person, PersonMode, Rate, Seed, Trees, Vehicles
+from server.settings import RunSettings
 
 if TYPE_CHECKING:
     from server.flightlog.log import FlightLog
-    from server.flightlog.records import LogHeader
 
 log = logging.getLogger(__name__)
 
 
-def log_path_option(*, log_path: Path | None, no_log: bool) -> Path | None:
-    """Where `--log PATH` / `--no-log` put the flight log (None: no log); default runs/flight-<UTC>.jsonl."""
-    from server.flightlog.log import default_log_path
-
-    if log_path is not None and no_log:
-        raise typer.BadParameter("give either --log PATH or --no-log, not both", param_hint="--log")
-    return None if no_log else (log_path or default_log_path())
-
-
-def open_log(path: Path, *, header: LogHeader) -> FlightLog:
-    """Create the flight log at `path` and write its header; a path that cannot be written is refused."""
-    from server.flightlog.log import FlightLog
-
-    try:
-        return FlightLog.create(path, header=header)
-    except OSError as exc:
-        raise typer.BadParameter(
-            f"cannot write the flight log {path}: {exc.strerror or exc} (choose another "
-            "path with --log PATH, or --no-log)",
-            param_hint="--log",
-        ) from None
-
-
-def describe_log(flight_log: FlightLog) -> str:
-    """One line about a closed flight log: where, what it holds, and any records lost."""
-    lost = f"; {flight_log.write_errors} records could not be written" if flight_log.write_errors else ""
-    return (
-        f"flight log:     {flight_log.name} ({flight_log.samples} samples, {flight_log.commands} "
-        f"commands{lost}); replay with: skyring replay {flight_log.name}"
-    )
-
-
-def build_station(*, vehicles: int, seed: int, method: Method, trees: str, person: str, rate_hz: float):
-    """A ground station over the embedded simulation: `vehicles` simulated MAVs, the paper's (or no, or N
-    random) trees and the walking (random, still) person, ticking at rate_hz."""
+def build_station(settings: RunSettings):
+    """A ground station over the embedded simulation of `settings`: its simulated MAVs, trees and person,
+    ticking at settings.rate_hz."""
     from server.station.ground_station import GroundStation, camera_view
-    from vehicles.sim.scenario import Scenario, build_sim
+    from vehicles.sim.scenario import build_sim
 
-    setup = build_sim(
-        Scenario(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person),
-        clock=time.perf_counter,
-    )
+    setup = build_sim(settings.scenario(), clock=time.perf_counter)
     return GroundStation(
-        mission=setup.mission, control_period_s=1.0 / rate_hz, camera=camera_view(setup.world.camera)
+        mission=setup.mission, control_period_s=1.0 / settings.rate_hz, camera=camera_view(setup.world.camera)
     )
 
 
@@ -113,19 +79,24 @@ def run(
         typer.echo(describe_log(flight_log))
 
 
+Speed = Annotated[
+    float, typer.Option(min=0.01, max=100.0, help="simulated seconds per wall second (PX4: 1, real time)")
+]
+
+
 def serve(
     host: Annotated[str, typer.Option(help="address to listen on (0.0.0.0: every interface)")] = "127.0.0.1",
-    port: Annotated[int, typer.Option(help="API port; a free one is used if it is busy")] = 8000,
+    port: Annotated[int, typer.Option(min=0, max=65535, help="API port; a free one is used if busy")] = 8000,
     viser_port: Annotated[
-        int, typer.Option(help="operator page (viser) port; the next free one if busy")
+        int, typer.Option(min=0, max=65535, help="operator page (viser) port; the next free one if busy")
     ] = 8080,
-    vehicles: Annotated[int, typer.Option(help="number of simulated MAVs")] = 3,
-    seed: Annotated[int, typer.Option(help="seed of the simulated world")] = 0,
-    speed: Annotated[float, typer.Option(help="simulated seconds per wall second")] = 1.0,
-    method: Annotated[Method, typer.Option(help="formation method")] = Method.ACTIVE,
-    trees: Annotated[str, typer.Option(help="paper, none, or a number of random trees")] = "paper",
-    person: Annotated[str, typer.Option(help="paper (scripted walk), random or still")] = "paper",
-    rate: Annotated[float, typer.Option(help="control rate in Hz (the paper: 100)")] = 100.0,
+    vehicles: Vehicles = 3,
+    seed: Seed = 0,
+    speed: Speed = 1.0,
+    method: MethodOption = Method.ACTIVE,
+    trees: Trees = "paper",
+    person: Person = PersonMode.paper,
+    rate: Rate = 100.0,
     px4: Annotated[
         list[str] | None,
         typer.Option(
@@ -134,7 +105,7 @@ def serve(
         ),
     ] = None,
     px4_sitl: Annotated[
-        int, typer.Option(help="fly N local PX4 SITL instances (udpin://0.0.0.0:14540+i)")
+        int, typer.Option(min=0, help="fly N local PX4 SITL instances (udpin://0.0.0.0:14540+i)")
     ] = 0,
     origin: Annotated[
         str | None,
@@ -171,18 +142,13 @@ def serve(
     multicast: Annotated[bool, typer.Option(help="find agents by multicast scouting")] = True,
 ) -> None:
     """Run the ground station over the embedded simulation: 3-D operator view, REST API and state stream."""
-    if not 1 <= vehicles <= 16:
-        raise typer.BadParameter(f"must be from 1 to 16, got {vehicles}", param_hint="--vehicles")
-    if not (math.isfinite(speed) and 0.0 < speed <= 100.0):
-        raise typer.BadParameter(f"must be in (0, 100], got {speed}", param_hint="--speed")
-    if not (math.isfinite(rate) and 1.0 <= rate <= 1000.0):
-        raise typer.BadParameter(f"must be from 1 to 1000 Hz, got {rate}", param_hint="--rate")
-    if seed < 0:
-        raise typer.BadParameter(f"must be >= 0, got {seed}", param_hint="--seed")
-    for name, value in (("--port", port), ("--viser-port", viser_port)):
-        if not 0 <= value <= 65535:
-            raise typer.BadParameter(f"must be a TCP port (0-65535), got {value}", param_hint=name)
     log_path = log_path_option(log_path=log, no_log=no_log)
+    try:
+        settings = RunSettings(
+            vehicles=vehicles, seed=seed, method=method, trees=trees, person=person.value, rate_hz=rate
+        )
+    except ParameterError as exc:
+        raise typer.BadParameter(exc.reason, param_hint=OPTION_OF_FIELD.get(exc.field, exc.field)) from None
     if agents not in ("in-process", "zenoh", "spawn"):
         raise typer.BadParameter(f"must be in-process, zenoh or spawn, got {agents!r}", param_hint="--agents")
     if agents != "in-process":
@@ -205,10 +171,10 @@ def serve(
             vehicles=vehicles,
             px4=[u.strip() for item in px4 or [] for u in item.split(",") if u.strip()],
             origin=origin,
-            seed=seed,
-            method=method,
-            trees=trees,
-            person=person,
+            seed=settings.seed,
+            method=settings.method,
+            trees=settings.trees,
+            person=settings.person,
             host=host,
             port=port,
             viser_port=viser_port,
@@ -220,11 +186,7 @@ def serve(
             px4=px4 or [],
             sitl=px4_sitl,
             origin=origin,
-            seed=seed,
-            method=method,
-            person=person,
-            trees=trees,
-            rate_hz=rate,
+            settings=settings,
             host=host,
             port=port,
             viser_port=viser_port,
@@ -232,41 +194,11 @@ def serve(
             log_path=log_path,
         )
         return
-    from vehicles.sim.scenario import PERSON_MODES
-    from vehicles.sim.trees import TreeSpec
-
-    try:
-        TreeSpec.parse(trees)
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--trees") from None
-    if person not in PERSON_MODES:
-        raise typer.BadParameter(
-            f"must be one of {', '.join(PERSON_MODES)}, got {person!r}", param_hint="--person"
-        )
     flight_log = None
     if log_path is not None:
-        from server.flightlog.log import DEFAULT_SAMPLE_RATE_HZ, utc_now_iso
-        from server.flightlog.records import LogHeader
-
-        flight_log = open_log(
-            log_path,
-            header=LogHeader(
-                command="serve",
-                vehicles=vehicles,
-                seed=seed,
-                method=method.value,
-                trees=trees,
-                person=person,
-                rate_hz=rate,
-                speed=speed,
-                sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
-                started_utc=utc_now_iso(),
-            ),
-        )
+        flight_log = open_log(log_path, header=log_header(settings, command="serve", speed=speed))
     try:
-        station = build_station(
-            vehicles=vehicles, seed=seed, method=method, trees=trees, person=person, rate_hz=rate
-        )
+        station = build_station(settings)
     except BaseException:
         if flight_log is not None:
             flight_log.close()
@@ -280,11 +212,7 @@ def run_px4(
     px4: Sequence[str],
     sitl: int,
     origin: str | None,
-    seed: int,
-    method: Method,
-    person: str,
-    trees: str,
-    rate_hz: float,
+    settings: RunSettings,
     host: str,
     port: int,
     viser_port: int,
@@ -293,11 +221,10 @@ def run_px4(
 ) -> None:
     """`skyring serve --px4 URL ... | --px4-sitl N [--origin lat,lon,alt]`: validate, connect, serve until
     Ctrl-C / SIGTERM, land every MAV on the way out. `--px4` may be repeated or hold comma-separated URLs.
-    log_path: the flight log to write (None: none), opened before connecting."""
+    settings: the person, trees, seed, method and rate (its vehicle count is that of the URLs); log_path: the
+    flight log to write (None: none), opened before connecting."""
     import mavsdk
 
-    from server.flightlog.log import DEFAULT_SAMPLE_RATE_HZ, utc_now_iso
-    from server.flightlog.records import LogHeader
     from server.station.live import Urls
     from server.station.px4 import px4_urls, serve_px4
     from vehicles.px4.autopilot import Px4Error
@@ -324,20 +251,7 @@ def run_px4(
         None
         if log_path is None
         else open_log(
-            log_path,
-            header=LogHeader(
-                command="serve --px4",
-                vehicles=len(urls),
-                seed=seed,
-                method=Method(method).value,
-                trees=trees,
-                person=person,
-                rate_hz=rate_hz,
-                speed=1.0,
-                sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
-                started_utc=utc_now_iso(),
-                vehicle_urls=tuple(urls),
-            ),
+            log_path, header=log_header(settings, command="serve --px4", speed=1.0, vehicle_urls=urls)
         )
     )
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
@@ -346,11 +260,11 @@ def run_px4(
             serve_px4(
                 urls,
                 origin=reference,
-                seed=seed,
-                method=method,
-                person=person,
-                trees=trees,
-                rate_hz=rate_hz,
+                seed=settings.seed,
+                method=settings.method,
+                person=settings.person,
+                trees=settings.trees,
+                rate_hz=settings.rate_hz,
                 host=host,
                 port=port,
                 viser_port=viser_port,

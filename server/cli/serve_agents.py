@@ -13,7 +13,8 @@ from pathlib import Path
 import typer
 
 from controller.params import Method
-from server.cli.serve import describe_log, open_log
+from server.cli.log_options import describe_log, open_log
+from vehicles.autopilot import Autopilot
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +111,7 @@ async def serve_agents(
     from server.station.live import Urls, serve_station
 
     fleet_px4 = None
-    override = None
+    override: dict[int, Autopilot] | None = None
     if px4:
         import mavsdk
 

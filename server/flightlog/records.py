@@ -47,6 +47,21 @@ def _qv(values) -> tuple[float, ...]:
     return tuple(_q(v) for v in np.asarray(values, dtype=float).ravel())
 
 
+def _qv2(values) -> Vec2:
+    x, y = _qv(values)
+    return x, y
+
+
+def _qv3(values) -> Vec3:
+    x, y, z = _qv(values)
+    return x, y, z
+
+
+def _qv4(values) -> tuple[float, float, float, float]:
+    a, b, c, d = _qv(values)
+    return a, b, c, d
+
+
 def _out(x: float | None) -> float | None:
     """A number as JSON: null for None, NaN and infinities."""
     return x if x is not None and math.isfinite(x) else None
@@ -73,6 +88,21 @@ def _inv(values: Any, n: int) -> tuple[float, ...]:
     if not isinstance(values, list) or len(values) != n:
         raise RecordError(f"expected a list of {n} numbers, got {values!r}")
     return tuple(_in(v) for v in values)
+
+
+def _inv2(values: Any) -> Vec2:
+    x, y = _inv(values, 2)
+    return x, y
+
+
+def _inv3(values: Any) -> Vec3:
+    x, y, z = _inv(values, 3)
+    return x, y, z
+
+
+def _inv4(values: Any) -> tuple[float, float, float, float]:
+    a, b, c, d = _inv(values, 4)
+    return a, b, c, d
 
 
 def _field(obj: Any, name: str, kind: type | tuple[type, ...]) -> Any:
@@ -284,15 +314,15 @@ class VehicleSample:
             armed=_field(obj, "armed", bool),
             in_air=_field(obj, "in_air", bool),
             in_formation=_field(obj, "in_formation", bool),
-            position_m=_inv(obj.get("position_m"), 3),
-            velocity_mps=_inv(obj.get("velocity_mps"), 3),
+            position_m=_inv3(obj.get("position_m")),
+            velocity_mps=_inv3(obj.get("velocity_mps")),
             yaw_rad=_in(obj.get("yaw_rad")),
             link_age_s=math.inf if age is None else _in(age),
             link_stale=_field(obj, "link_stale", bool),
             solve_status=_field(obj, "solve_status", str),
             solver_time_s=_in_opt(obj.get("solver_time_s")),
             battery_fraction=_in_opt(obj.get("battery_fraction")),
-            plan_positions_m=tuple(_inv(p, 3) for p in _field(obj, "plan_positions_m", list)),
+            plan_positions_m=tuple(_inv3(p) for p in _field(obj, "plan_positions_m", list)),
         )
 
 
@@ -321,8 +351,8 @@ class EstimateSample:
         return cls(
             source_id=_field(obj, "source_id", int),
             stamp_s=_in(obj.get("stamp_s")),
-            position_m=_inv(obj.get("position_m"), 3),
-            velocity_mps=_inv(obj.get("velocity_mps"), 3),
+            position_m=_inv3(obj.get("position_m")),
+            velocity_mps=_inv3(obj.get("velocity_mps")),
             cov=_inv(obj.get("cov"), 36),
         )
 
@@ -351,7 +381,7 @@ class ObstacleSample:
         return cls(
             obstacle_id=_field(obj, "id", str),
             kind=_field(obj, "kind", str),
-            center_m=_inv(obj.get("center_m"), 2),
+            center_m=_inv2(obj.get("center_m")),
             radius_m=_in(obj.get("radius_m")),
             height_m=_in(obj.get("height_m")),
         )
@@ -415,15 +445,15 @@ class LogSample:
             d_des_m=_in(obj.get("d_des_m")),
             h_des_m=_in(obj.get("h_des_m")),
             formation_enabled=_field(obj, "formation_enabled", bool),
-            person_truth_m=None if truth is None else _inv(truth, 3),
+            person_truth_m=None if truth is None else _inv3(truth),
             estimate=None if estimate is None else EstimateSample.from_json(estimate),
             tracking_error_m=_in_opt(obj.get("tracking_error_m")),
-            d_des_range_m=_inv(obj.get("d_des_range_m"), 2),
-            h_des_range_m=_inv(obj.get("h_des_range_m"), 2),
-            obstacle_radius_range_m=_inv(obj.get("obstacle_radius_range_m"), 2),
-            arena_min_m=_inv(obj.get("arena_min_m"), 3),
-            arena_max_m=_inv(obj.get("arena_max_m"), 3),
-            camera=_inv(obj.get("camera"), 4),
+            d_des_range_m=_inv2(obj.get("d_des_range_m")),
+            h_des_range_m=_inv2(obj.get("h_des_range_m")),
+            obstacle_radius_range_m=_inv2(obj.get("obstacle_radius_range_m")),
+            arena_min_m=_inv3(obj.get("arena_min_m")),
+            arena_max_m=_inv3(obj.get("arena_max_m")),
+            camera=_inv4(obj.get("camera")),
         )
 
 
@@ -474,15 +504,15 @@ def sample_from(snapshot: MissionSnapshot, view: SceneView) -> LogSample:
             armed=v.armed,
             in_air=v.in_air,
             in_formation=v.in_formation,
-            position_m=_qv(v.position_m),
-            velocity_mps=_qv(velocities.get(v.vehicle_id, (math.nan,) * 3)),
+            position_m=_qv3(v.position_m),
+            velocity_mps=_qv3(velocities.get(v.vehicle_id, (math.nan,) * 3)),
             yaw_rad=_q(v.yaw_rad),
             link_age_s=_q(v.link_age_s),
             link_stale=v.link_stale,
             solve_status=v.solve_status,
             solver_time_s=None if v.solver_time_s is None else _q(v.solver_time_s),
             battery_fraction=None if v.battery_fraction is None else _q(v.battery_fraction),
-            plan_positions_m=tuple(_qv(p) for p in v.plan_positions_m),
+            plan_positions_m=tuple(_qv3(p) for p in v.plan_positions_m),
         )
 
     e = view.person_estimate
@@ -494,7 +524,7 @@ def sample_from(snapshot: MissionSnapshot, view: SceneView) -> LogSample:
             ObstacleSample(
                 obstacle_id=o.obstacle_id,
                 kind=o.kind,
-                center_m=_qv(o.center_m),
+                center_m=_qv2(o.center_m),
                 radius_m=_q(o.radius_m),
                 height_m=_q(o.height_m),
             )
@@ -503,23 +533,23 @@ def sample_from(snapshot: MissionSnapshot, view: SceneView) -> LogSample:
         d_des_m=_q(view.formation.d_des_m),
         h_des_m=_q(view.formation.h_des_m),
         formation_enabled=bool(view.formation_enabled),
-        person_truth_m=None if view.person_truth_m is None else _qv(view.person_truth_m),
+        person_truth_m=None if view.person_truth_m is None else _qv3(view.person_truth_m),
         estimate=None
         if e is None
         else EstimateSample(
             source_id=int(view.estimate_source_id if view.estimate_source_id is not None else -1),
             stamp_s=float(e.stamp_s),
-            position_m=_qv(e.position_m),
-            velocity_mps=_qv(e.velocity_mps),
+            position_m=_qv3(e.position_m),
+            velocity_mps=_qv3(e.velocity_mps),
             cov=_qv(e.cov),
         ),
         tracking_error_m=None if view.tracking_error_m is None else _q(view.tracking_error_m),
-        d_des_range_m=_qv((view.d_des_range_m.low, view.d_des_range_m.high)),
-        h_des_range_m=_qv((view.h_des_range_m.low, view.h_des_range_m.high)),
-        obstacle_radius_range_m=_qv((view.obstacle_radius_range_m.low, view.obstacle_radius_range_m.high)),
-        arena_min_m=_qv(view.arena_min_m),
-        arena_max_m=_qv(view.arena_max_m),
-        camera=_qv((c.vertical_fov_rad, c.aspect, c.pitch_down_rad, c.forward_offset_m)),
+        d_des_range_m=_qv2((view.d_des_range_m.low, view.d_des_range_m.high)),
+        h_des_range_m=_qv2((view.h_des_range_m.low, view.h_des_range_m.high)),
+        obstacle_radius_range_m=_qv2((view.obstacle_radius_range_m.low, view.obstacle_radius_range_m.high)),
+        arena_min_m=_qv3(view.arena_min_m),
+        arena_max_m=_qv3(view.arena_max_m),
+        camera=_qv4((c.vertical_fov_rad, c.aspect, c.pitch_down_rad, c.forward_offset_m)),
     )
 
 

@@ -91,6 +91,10 @@ def run(*, repeats: int) -> None:
     loop = asyncio.new_event_loop()
     stop = asyncio.Event()
 
+    def on_ready(urls: Urls, _ui: object) -> None:
+        box.update(urls=urls)
+        ready.set()
+
     def serve() -> None:
         asyncio.set_event_loop(loop)
         loop.run_until_complete(
@@ -100,7 +104,7 @@ def run(*, repeats: int) -> None:
                 viser_port=0,
                 stop=stop,
                 handle_signals=False,
-                on_ready=lambda urls, ui: (box.update(urls=urls), ready.set()),
+                on_ready=on_ready,
             )
         )
         loop.close()

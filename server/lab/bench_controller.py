@@ -3,8 +3,9 @@
 A tick is what one MAV computes per control period: fuse one detection in its person tracker, then the
 formation controller's step (teammates' plans on our horizon, every external input, the MPC solve, the
 way-point). It is timed for K = 3, 8, 16 MAVs (K - 1 teammates' plans, the paper's 13 trees, the person on the
-paper's path) in a running closed loop, so plans and inputs look like a flight. Target (issue 2): median
-<= 0.2 ms per tick at K = 16. Speed is measured here, never in tests.
+paper's path) in a running closed loop, so plans and inputs look like a flight. Target
+(docs/architecture.md#performance-targets): median <= 0.2 ms per tick at K = 16. Speed is measured here, never
+in tests.
 """
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ def run(*, repeats: int) -> None:
         for vid in range(1, MAVS + 1)
     ]
     detection = wire.detection_to_wire(
-        Detection(source_id=1, stamp_s=0.0, position_m=(1.0, 2.0, 0.9), cov_m2=np.eye(3) * 0.2)
+        Detection(source_id=1, stamp_s=0.0, position_m=np.array([1.0, 2.0, 0.9]), cov_m2=np.eye(3) * 0.2)
     )
     sent_before = [b.sent_bytes for b in buses]
     recording.set()

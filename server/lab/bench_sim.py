@@ -1,13 +1,15 @@
 """`skyring bench sim`: how fast the embedded simulator runs 16 MAVs at the paper's 100 Hz control rate.
 
-Target (issue 3): at least 5x real time in one process on one core. The real-time factor is measured after a
-10 s warm-up (takeoff), like the report's `realtime_factor`: world, 16 agents (tracker, controller), links
-and the runner's bookkeeping included. Two rows: the MPC solved every control tick (the paper), and solved
-at 10 Hz with the set-points following the latest plan in between (`--replan-rate 10`).
+Target (docs/architecture.md#performance-targets): at least 5x real time in one process on one core. The
+real-time factor is measured after a 10 s warm-up (takeoff), like the report's `realtime_factor`: world, 16
+agents (tracker, controller), links and the runner's bookkeeping included. Two rows: the MPC solved every
+control tick (the paper), and solved at 10 Hz with the set-points following the latest plan in between
+(`--replan-rate 10`).
 """
 
 from __future__ import annotations
 
+from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
 
 TARGET_REALTIME_FACTOR = 5.0
@@ -31,7 +33,7 @@ def run(*, repeats: int) -> None:
             seed=1,
             trees="paper",
             person="paper",
-            method="active",
+            method=Method.ACTIVE,
             replan_hz=replan_hz,
         )
         m = run_simulation(config).metrics

@@ -118,7 +118,7 @@ class ProfileOverrides:
     rate_hz: float | None = None
 
 
-# ---- the paper's protocol (METHOD.md "Experiments in the paper") -------------------------------------------
+# ---- the paper's protocol (docs/method.md#experiments) ----------------------------------------------------
 
 PAPER_METHODS: tuple[tuple[str, str, str], ...] = (
     # (label, method, virtual obstacles): SE4 avoids the paper's 13 tree positions as virtual obstacles

@@ -1,4 +1,5 @@
-"""The metrics of a simulation run (issue 3), computed from what a `Recorder` collected after the warm-up.
+"""The metrics of a simulation run (docs/method.md#experiments), computed from what a `Recorder` collected
+after the warm-up.
 
 Names are a public interface (the JSON report, the experiments' tables): keep them, add new ones beside them.
 

@@ -51,7 +51,8 @@ IN_FRAME_MIN = 0.90  # paper: "almost 94 %" of frames with the person fully in t
 LOSS_TOLERANCE = 0.20  # "accurate up to 25 % loss": error within 20 % of the loss-free error
 OBSTACLE_TOLERANCE = 0.20  # "only slightly deteriorates": error within 20 % of the obstacle-free error
 LOSS_ACCURATE_PERCENT = 25.0
-# The controllers' teammate d_min (METHOD.md): a closer true approach is reported under each family's table.
+# The controllers' teammate d_min (docs/method.md#avoidance-guarantee): a closer true approach is reported
+# under each family's table.
 SEPARATION_MIN_M = 1.5
 SEPARATION = "min_separation_m"
 BELIEVED_SEPARATION = "min_believed_separation_m"
@@ -103,7 +104,7 @@ class Stat:
         return self.q75 - self.q25
 
 
-def describe(values: Sequence[float]) -> Stat | None:
+def describe(values: Sequence[float | None]) -> Stat | None:
     """The `Stat` of the finite values in `values`, or None if there are none."""
     arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if arr.size == 0:
@@ -175,7 +176,7 @@ def summarize(protocol: Protocol, results: Sequence[RunResult]) -> FamilySummary
             if r.spec.family == protocol.family and r.spec.condition == cond
         }
         flats = [
-            flatten(r.report.get("metrics", {})) if r is not None and r.ok else {}
+            flatten(r.report.get("metrics", {})) if r is not None and r.report is not None else {}
             for r in (by_index.get(i) for i in range(protocol.runs))
         ]
         names = sorted({m for f in flats for m in f})
@@ -223,9 +224,9 @@ def _paired_text(best: Sequence[float], other: Sequence[float]) -> str:
     text = f"lower in {sum(a < b for a, b in pairs)} of {len(pairs)} paired runs"
     diffs = [a - b for a, b in pairs]
     if len(pairs) >= 5 and any(diffs):
-        text += (
-            f", one-sided Wilcoxon p = {_fmt(float(scipy_stats.wilcoxon(diffs, alternative='less').pvalue))}"
-        )
+        test = scipy_stats.wilcoxon(diffs, alternative="less")
+        p_value = float(test.pvalue)  # pyright: ignore[reportAttributeAccessIssue]  # scipy's result is untyped
+        text += f", one-sided Wilcoxon p = {_fmt(p_value)}"
     return text
 
 
@@ -238,12 +239,13 @@ def _lower_than_all(
     others: Sequence[ConditionSummary | None],
 ) -> ClaimCheck:
     """Claim: `best` has a lower mean `metric` than every one of `others`."""
-    if best is None or any(o is None for o in others) or best.mean(metric) is None:
+    ours = None if best is None else best.mean(metric)
+    present = [o for o in others if o is not None]
+    if best is None or ours is None or len(present) < len(others):
         return ClaimCheck(family, claim, "the conditions to compare were not run", None)
-    ours = best.mean(metric)
     parts = []
     agrees = True
-    for o in others:
+    for o in present:
         m = o.mean(metric)
         if m is None:
             return ClaimCheck(family, claim, f"{metric} missing for {o.condition.name}", None)
@@ -300,16 +302,16 @@ def _methods_claims(s: FamilySummary) -> list[ClaimCheck]:
         f"Without obstacles, the active method keeps the person fully in the image about 94 % of the time "
         f"(we require at least {IN_FRAME_MIN:.0%})."
     )
-    frac = None if se3 is None else se3.mean(IN_FRAME)
-    if frac is None:
+    in_frame = None if se3 is None else se3.stat(IN_FRAME)
+    if in_frame is None:
         claims.append(ClaimCheck(s.family, claim, "SE3 was not run", None))
     else:
         claims.append(
             ClaimCheck(
                 s.family,
                 claim,
-                f"SE3 mean {IN_FRAME} = {_fmt(frac)} (lowest run {_fmt(se3.stat(IN_FRAME).min)})",
-                frac >= IN_FRAME_MIN,
+                f"SE3 mean {IN_FRAME} = {_fmt(in_frame.mean)} (lowest run {_fmt(in_frame.min)})",
+                in_frame.mean >= IN_FRAME_MIN,
             )
         )
     claims.append(
@@ -339,7 +341,7 @@ def _methods_claims(s: FamilySummary) -> list[ClaimCheck]:
 
 def _sweep(s: FamilySummary, metric: str) -> tuple[np.ndarray, np.ndarray]:
     """(x, mean of `metric`) of the conditions that have it, in x order."""
-    pts = sorted((c.condition.x, c.mean(metric)) for c in s.conditions if c.mean(metric) is not None)
+    pts = sorted((c.condition.x, m) for c in s.conditions if (m := c.mean(metric)) is not None)
     return np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
 
 
@@ -349,12 +351,15 @@ def _trend_text(x: np.ndarray, y: np.ndarray, x_unit: str) -> str:
         return ""
     if np.ptp(y) == 0.0:
         return "; the means are all equal"
+    slope, r_value = _line_fit(x, y)
+    rho = float(scipy_stats.spearmanr(x, y).statistic)  # pyright: ignore[reportAttributeAccessIssue]  # untyped
+    return f"; linear fit {_fmt(slope)} m per {x_unit}, R^2 = {_fmt(r_value**2)}, Spearman rho = {_fmt(rho)}"
+
+
+def _line_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Slope and correlation coefficient r of the least-squares line through (x, y) (scipy's linregress)."""
     fit = scipy_stats.linregress(x, y)
-    rho = scipy_stats.spearmanr(x, y).statistic
-    return (
-        f"; linear fit {_fmt(fit.slope)} m per {x_unit}, R^2 = {_fmt(fit.rvalue**2)}, "
-        f"Spearman rho = {_fmt(rho)}"
-    )
+    return float(fit.slope), float(fit.rvalue)  # pyright: ignore[reportAttributeAccessIssue]  # untyped result
 
 
 def _scalability_claims(s: FamilySummary) -> list[ClaimCheck]:
@@ -366,7 +371,7 @@ def _scalability_claims(s: FamilySummary) -> list[ClaimCheck]:
     x, y = _sweep(s, ERROR)
     if len(x) < 2:
         return [ClaimCheck(s.family, claim, "fewer than two team sizes were run", None)]
-    slope = scipy_stats.linregress(x, y).slope if len(x) >= 3 else (y[-1] - y[0]) / (x[-1] - x[0])
+    slope = _line_fit(x, y)[0] if len(x) >= 3 else (y[-1] - y[0]) / (x[-1] - x[0])
     evidence = (
         f"mean {ERROR}: {x[0]:g} MAVs {_fmt(y[0])} m, {x[-1]:g} MAVs {_fmt(y[-1])} m"
         f"{_trend_text(x, y, 'MAV')}"
@@ -512,7 +517,7 @@ def timing_table(summaries: Sequence[FamilySummary], results: Sequence[RunResult
     for s in summaries:
         for c in s.conditions:
             mine = [r for r in results if r.spec.family == s.family and r.spec.condition == c.condition]
-            cells = [_fmt(c.stat(m).median) if c.stat(m) else "n/a" for m in names]
+            cells = [_fmt(stat.median) if (stat := c.stat(m)) is not None else "n/a" for m in names]
             rows.append([s.family, c.condition.name, *cells, f"{sum(r.wall_s for r in mine):.1f}"])
     return markdown_table(["family", "condition", *(f"{m} (median)" for m in names), "wall time (s)"], rows)
 
@@ -535,6 +540,17 @@ def render_report(
     wall_time_s: float,
 ) -> str:
     """The whole `report.md`. Everything above the timing section depends only on the runs' JSON reports."""
+    lines = _overview(context, summaries, results)
+    for s in summaries:
+        lines += _family_section(s, figures.get(s.family, ()))
+    lines += _timing_section(summaries, results, wall_time_s)
+    return "\n".join(lines)
+
+
+def _overview(
+    context: ReportContext, summaries: Sequence[FamilySummary], results: Sequence[RunResult]
+) -> list[str]:
+    """Title, how the runs were made, the protocol of each family, and the failed runs."""
     failed = [r for r in results if not r.ok]
     lines = [
         "# skyring experiments: the paper's simulation study, rerun",
@@ -567,43 +583,50 @@ def render_report(
             f"- failed: {r.spec.family} / {r.spec.condition.name} / run {r.spec.run_index} "
             f"(seed {r.spec.seed}): {r.error}"
         )
-    for s in summaries:
+    return lines
+
+
+def _family_section(s: FamilySummary, figures: Sequence[str]) -> list[str]:
+    """One family: its table, counters, figures, the paper's claims and any separation notes."""
+    lines = [
+        "",
+        f"## {TITLES[s.family]}",
+        "",
+        "Each cell: mean / median (interquartile range) over the condition's runs of the per-run value.",
+        "",
+        family_table(s),
+        "",
+    ]
+    counts = s.metrics("count")
+    if counts:
+        lines += ["Counters, summed over each condition's runs:", ""]
+        for c in s.conditions:
+            totals = ", ".join(f"{m.removeprefix('counters.')} {_total(c.values.get(m, ()))}" for m in counts)
+            lines.append(f"- {c.condition.name}: {totals}")
+        lines.append("")
+    lines += [f"![{s.family}]({fig})" for fig in figures]
+    lines += ["", "The paper's claims against our numbers:", ""]
+    lines += [f"- **{c.verdict}**: {c.claim} Ours: {c.evidence}." for c in check_claims(s)]
+    notes = separation_notes(s)
+    if notes:
         lines += [
             "",
-            f"## {TITLES[s.family]}",
+            f"Safety: runs in which two MAVs came closer than {SEPARATION_MIN_M:g} m (the controllers' "
+            "d_min) between their true positions, and in those runs the closest approach between the "
+            "positions the MAVs believed they were at (self-localisation with GPS drift: what the "
+            "controllers keep apart). A believed approach below d_min too means the controllers "
+            "themselves let the MAVs close in; a believed approach above it means the drift did.",
             "",
-            "Each cell: mean / median (interquartile range) over the condition's runs of the per-run value.",
-            "",
-            family_table(s),
-            "",
+            *(f"- {n}" for n in notes),
         ]
-        counts = s.metrics("count")
-        if counts:
-            lines += ["Counters, summed over each condition's runs:", ""]
-            for c in s.conditions:
-                totals = ", ".join(
-                    f"{m.removeprefix('counters.')} {_total(c.values.get(m, ()))}" for m in counts
-                )
-                lines.append(f"- {c.condition.name}: {totals}")
-            lines.append("")
-        for fig in figures.get(s.family, ()):
-            lines.append(f"![{s.family}]({fig})")
-        lines += ["", "The paper's claims against our numbers:", ""]
-        for c in check_claims(s):
-            lines.append(f"- **{c.verdict}**: {c.claim} Ours: {c.evidence}.")
-        notes = separation_notes(s)
-        if notes:
-            lines += [
-                "",
-                f"Safety: runs in which two MAVs came closer than {SEPARATION_MIN_M:g} m (the controllers' "
-                "d_min) between their true positions, and in those runs the closest approach between the "
-                "positions the MAVs believed they were at (self-localisation with GPS drift, METHOD.md: what "
-                "the controllers keep apart). A believed approach below d_min too means the controllers "
-                "themselves let the MAVs close in; a believed approach above it means the drift did.",
-                "",
-                *(f"- {n}" for n in notes),
-            ]
-    lines += [
+    return lines
+
+
+def _timing_section(
+    summaries: Sequence[FamilySummary], results: Sequence[RunResult], wall_time_s: float
+) -> list[str]:
+    """What was measured with a clock: the only part that differs between reruns of the same command."""
+    return [
         "",
         TIMING_HEADING,
         "",
@@ -616,7 +639,6 @@ def render_report(
         timing_table(summaries, results),
         "",
     ]
-    return "\n".join(lines)
 
 
 def reproducible_part(report_md: str) -> str:

@@ -9,118 +9,43 @@ experiments' worker processes call.
 from __future__ import annotations
 
 import json
-import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from controller.params import FormationParams, Method
+from controller.params import ParameterError
 from server.lab.metrics import Recorder, TickSample
+from server.settings import RunSettings, real_number
 from vehicles.agent import AgentParams
 from vehicles.mission import MissionSnapshot, Phase, VehicleSnapshot
 from vehicles.sim.autopilot import SimAutopilot
-from vehicles.sim.scenario import Scenario, SimSetup, build_sim
-from vehicles.sim.trees import TreeSpec
+from vehicles.sim.scenario import SimSetup, build_sim
 
 TIMING_METRICS = ("tick_ms", "realtime_factor")
 
 
 @dataclass(frozen=True)
-class SimConfig:
-    """One headless run.
+class SimConfig(RunSettings):
+    """One headless run: the team, world and rates of `RunSettings` (server/settings.py), and its length.
 
-    vehicles: K >= 1; duration_s: simulated seconds (> 0), warm-up included; seed: >= 0; method: active,
-    dqmpc or price; trees: "paper", "none" or a number N of random trees; comm_loss in [0, 1]; person:
-    paper, random or still; warmup_s: metrics start after this (0 <= warmup_s < duration_s; the default
-    covers takeoff, about 7 s, and settling); rate_hz: control rate (the paper: 100 Hz); d_des_m, h_des_m:
-    the operator's formation; start: ring or cluster (see vehicles.sim.scenario.Scenario); latency_s: link
-    latency; gps_drift: simulate self-localisation drift; virtual_obstacles: none or paper (the paper's 13
-    tree positions as virtual obstacles: avoided, not seen by the cameras; the paper's SE4); replan_hz: 0
-    solves every MAV's MPC every control tick (the paper), a positive rate (<= rate_hz) solves it at most that
-    often and follows the latest plan in between (vehicles.agent; for large teams, faster than real time).
+    duration_s: simulated seconds (> 0), warm-up included; warmup_s: metrics start after this (0 <= warmup_s
+    < duration_s; the default covers takeoff, about 7 s, and settling).
     """
 
-    vehicles: int = 3
     duration_s: float = 60.0
-    seed: int = 0
-    method: str = "active"
-    trees: str = "paper"
-    comm_loss: float = 0.0
-    person: str = "paper"
     warmup_s: float = 20.0
-    rate_hz: float = 100.0
-    d_des_m: float = 8.0
-    h_des_m: float = 8.0
-    start: str = "ring"
-    latency_s: float = 0.03
-    gps_drift: bool = True
-    virtual_obstacles: str = "none"
-    replan_hz: float = 0.0
 
     def __post_init__(self) -> None:
-        vehicles = self.vehicles
-        if isinstance(vehicles, bool) or not isinstance(vehicles, int | np.integer) or vehicles < 1:
-            raise ValueError(f"vehicles must be an integer >= 1, got {self.vehicles!r}")
-        object.__setattr__(self, "vehicles", int(self.vehicles))
-        if not (
-            isinstance(self.duration_s, int | float)
-            and math.isfinite(self.duration_s)
-            and self.duration_s > 0
-        ):
-            raise ValueError(f"duration_s must be a positive number of seconds, got {self.duration_s!r}")
-        if not (isinstance(self.seed, int | np.integer) and self.seed >= 0):
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
-        object.__setattr__(self, "seed", int(self.seed))
-        try:
-            object.__setattr__(self, "method", Method(str(self.method).lower()).value)
-        except ValueError:
-            raise ValueError(
-                f"method must be one of {', '.join(m.value for m in Method)}, got {self.method!r}"
-            ) from None
-        object.__setattr__(self, "trees", str(TreeSpec.parse(str(self.trees))))
-        if not (isinstance(self.comm_loss, int | float) and 0.0 <= self.comm_loss <= 1.0):
-            raise ValueError(f"comm_loss must be a probability in [0, 1], got {self.comm_loss!r}")
-        if not (isinstance(self.warmup_s, int | float) and 0.0 <= self.warmup_s < self.duration_s):
-            raise ValueError(
-                f"warmup_s must be >= 0 and below duration_s ({self.duration_s}), got {self.warmup_s!r}"
-            )
-        if not (isinstance(self.rate_hz, int | float) and 1.0 <= self.rate_hz <= 1000.0):
-            raise ValueError(f"rate_hz must be between 1 and 1000, got {self.rate_hz!r}")
-        for name in ("d_des_m", "h_des_m"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number of metres, got {value!r}")
-        if not (
-            isinstance(self.replan_hz, int | float)
-            and (self.replan_hz == 0.0 or 0.0 < self.replan_hz <= self.rate_hz)
-        ):
-            raise ValueError(
-                f"replan_hz must be 0 (every tick) or in (0, rate_hz = {self.rate_hz}], "
-                f"got {self.replan_hz!r}"
-            )
-        self.scenario()  # person, start, latency: validated where they are defined
-
-    def scenario(self) -> Scenario:
-        """The world and team this config flies."""
-        return Scenario(
-            vehicles=self.vehicles,
-            seed=self.seed,
-            method=Method(self.method),
-            trees=self.trees,
-            person=self.person,
-            comm_loss=float(self.comm_loss),
-            latency_s=self.latency_s,
-            start=self.start,
-            gps_drift=self.gps_drift,
-            virtual_obstacles=self.virtual_obstacles,
-            formation=FormationParams(d_des_m=self.d_des_m, h_des_m=self.h_des_m),
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        super().__post_init__()
+        duration = real_number("duration_s", self.duration_s, low=0.0, low_open=True)
+        object.__setattr__(self, "duration_s", duration)
+        warmup = real_number("warmup_s", self.warmup_s, low=0.0)
+        if warmup >= duration:
+            raise ParameterError("warmup_s", f"must be below duration_s ({duration:g} s), got {warmup:g}")
+        object.__setattr__(self, "warmup_s", warmup)
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,7 +68,10 @@ class SimReport:
 
 
 def _sample(setup: SimSetup, snap: MissionSnapshot, t: float) -> TickSample:
-    person = np.asarray(snap.person_truth.position_m)
+    truth = snap.person_truth
+    if truth is None:
+        raise ValueError("the simulated world must know where the person is")
+    person = np.asarray(truth.position_m)
     k = len(snap.vehicles)
     estimates = np.full((k, 3), np.nan)
     traces = np.full(k, np.nan)
@@ -177,9 +105,10 @@ def _believed(vehicle: VehicleSnapshot, autopilot: SimAutopilot) -> np.ndarray:
 def run_simulation(config: SimConfig, *, progress: Callable[[float], None] | None = None) -> SimReport:
     """Run `config` headless and return its report. progress(t_s), if given, is called about once a
     simulated second."""
-    replan_s = 1.0 / config.replan_hz if config.replan_hz > 0 else 0.0
     setup = build_sim(
-        config.scenario(), clock=time.perf_counter, agent_params=AgentParams(replan_period_s=replan_s)
+        config.scenario(),
+        clock=time.perf_counter,
+        agent_params=AgentParams(replan_period_s=config.replan_period_s),
     )
     mission, world = setup.mission, setup.world
     recorder = Recorder(obstacles=mission.obstacles())

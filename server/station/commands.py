@@ -80,6 +80,11 @@ class CommandLimits:
         )
 
 
+def _vec3(values: Sequence[float]) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
 def limits_from_params(
     params: ControllerParams,
     *,
@@ -90,8 +95,8 @@ def limits_from_params(
     MAV's self-localisation covariance radius (sqrt of 0.25 m^2, the default VehicleState covariance)."""
     f = params.fields
     return CommandLimits(
-        arena_min_m=tuple(float(v) for v in params.mpc.position_min_m),
-        arena_max_m=tuple(float(v) for v in params.mpc.position_max_m),
+        arena_min_m=_vec3(params.mpc.position_min_m),
+        arena_max_m=_vec3(params.mpc.position_max_m),
         safety_distance_m=f.teammate_d_min_m,
         obstacle_clearance_m=f.obstacle_d_min_m,
         formation_spacing_m=f.teammate_d_max_base_m + 2.0 * default_cov_radius_m,

@@ -29,6 +29,8 @@ from collections import OrderedDict, deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from controller.messages import Obstacle, SolveStatus
 from controller.params import ControllerParams, FormationParams
 from controller.tracker import TrackerStats
@@ -459,8 +461,8 @@ class AgentFleet:
             if s.setpoint is not None and s.setpoint_yaw_rad is not None:
                 setpoint = Setpoint(
                     stamp_s=utc,
-                    position_m=s.setpoint,
-                    velocity_mps=(0.0, 0.0, 0.0),
+                    position_m=np.array(s.setpoint, dtype=float),
+                    velocity_mps=np.zeros(3),
                     yaw_rad=s.setpoint_yaw_rad,
                 )
         except (ValueError, TypeError):

@@ -232,6 +232,9 @@ class GroundStation:
         message: str,
         result: object,
     ) -> None:
+        flight_log = self._log
+        if flight_log is None:
+            return
         try:
             arguments = tuple((k, scalar(v)) for k, v in bind().arguments.items() if k != "self")
             text = (
@@ -252,7 +255,7 @@ class GroundStation:
         except Exception:  # noqa: BLE001 - the log must never change a command's outcome
             log.exception("recording the %s command failed", name)
             return
-        self._log.record_command(command)
+        flight_log.record_command(command)
 
     # ---- reading ------------------------------------------------------------------------------------------
     def snapshot(self) -> MissionSnapshot:

@@ -335,8 +335,8 @@ async def serve_station(
         stop_task.cancel()
         if control.error is not None:
             raise control.error
-        if serve_task.done() and not serve_task.cancelled() and serve_task.exception() is not None:
-            raise serve_task.exception()
+        if serve_task.done() and not serve_task.cancelled() and (error := serve_task.exception()) is not None:
+            raise error
         return runner.stats
     finally:
         for sig in installed:

@@ -22,6 +22,8 @@ from controller.formation import FormationController
 from controller.messages import PersonEstimate, SolveStatus, VehicleState
 from controller.params import ControllerParams, FormationParams
 
+pytestmark = pytest.mark.slow  # closed-loop flights of up to 16 MAVs: minutes in all
+
 FORMATION = FormationParams(d_des_m=8.0, h_des_m=8.0)
 PERSON_Z_M = 0.9  # the person's body centre: MAVs fly at 8.9 m, inside the default arena's 10 m ceiling
 STILL_PERSON = np.array([0.3, -0.2, PERSON_Z_M])

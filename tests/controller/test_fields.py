@@ -1,5 +1,5 @@
 """Specification of the potential fields (controller/fields.py): the cotangential magnitude and every external
-input of paper eqs. 12-16."""
+input of paper eqs. 10-15."""
 
 from __future__ import annotations
 
@@ -96,7 +96,7 @@ def test_magnitude_is_zero_at_and_beyond_d_max():
 
 def test_magnitude_strictly_decreases_between_the_thresholds():
     d = np.linspace(1.5 + 1e-6, 3.0 - 1e-6, 500)
-    values = cotangential_magnitude(d, d_min=1.5, d_max=3.0, gain=50.0)
+    values = np.asarray(cotangential_magnitude(d, d_min=1.5, d_max=3.0, gain=50.0))
     assert np.all(np.diff(values) < 0.0)
     assert values[-1] > 0.0
 
@@ -114,8 +114,10 @@ def test_magnitude_below_d_min_is_saturated_at_its_finite_d_min_value():
 
 def test_magnitude_is_vectorised_like_scalar_calls():
     d = np.array([[0.5, 1.7], [2.2, 2.9]])
-    vector = cotangential_magnitude(d, d_min=1.5, d_max=3.0, gain=20.0)
-    scalar = [[cotangential_magnitude(float(x), d_min=1.5, d_max=3.0, gain=20.0) for x in row] for row in d]
+    vector = np.asarray(cotangential_magnitude(d, d_min=1.5, d_max=3.0, gain=20.0))
+    scalar = np.array(
+        [[cotangential_magnitude(float(x), d_min=1.5, d_max=3.0, gain=20.0) for x in row] for row in d]
+    )
     assert vector.shape == (2, 2)
     np.testing.assert_allclose(vector, scalar, rtol=1e-12)
     assert isinstance(cotangential_magnitude(2.0, d_min=1.5, d_max=3.0, gain=20.0), float)
@@ -499,7 +501,7 @@ def test_honest_gps_covariance_keeps_a_k16_neighbour_outside_d_max():
         now_s=5.0,
         dt_s=0.1,
         steps=16,
-        own_cov_radius_m=covariance_radius_m(np.diag([0.25, 0.25, 1.0])),
+        own_cov_radius_m=float(covariance_radius_m(np.diag([0.25, 0.25, 1.0]))),
         params=FieldParams(),
     )
     assert paths.d_max_m[0] == pytest.approx(3.0)
@@ -529,7 +531,7 @@ def test_price_reads_only_the_first_state_of_a_plan():
         params=FieldParams(),
         current_position_only=True,
     )
-    np.testing.assert_array_equal(team.positions_m[0], held([0.0, 0.0, 8.0]))
+    np.testing.assert_array_equal(team.positions_m[0], held(np.array([0.0, 0.0, 8.0])))
 
 
 def test_obstacle_with_non_finite_centre_is_dropped():

@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from numpy.typing import ArrayLike
 
 from controller.formation import FormationController
 from controller.messages import HorizonPlan, Obstacle, PersonEstimate, SolveStatus, VehicleState
@@ -18,8 +19,15 @@ FORMATION = FormationParams(d_des_m=8.0, h_des_m=8.0)
 PERSON_AT = np.array([0.0, 0.0, 0.9])
 
 
-def person(position=PERSON_AT, velocity=(0.0, 0.0, 0.0), stamp_s=0.0) -> PersonEstimate:
-    return PersonEstimate(stamp_s=stamp_s, position_m=position, velocity_mps=velocity, cov=np.eye(6) * 0.01)
+def person(
+    position: ArrayLike = PERSON_AT, velocity: ArrayLike = (0.0, 0.0, 0.0), stamp_s=0.0
+) -> PersonEstimate:
+    return PersonEstimate(
+        stamp_s=stamp_s,
+        position_m=np.asarray(position),
+        velocity_mps=np.asarray(velocity),
+        cov=np.eye(6) * 0.01,
+    )
 
 
 def state(position, velocity=(0.0, 0.0, 0.0), *, vehicle_id=0, stamp_s=0.0, yaw_rad=0.0) -> VehicleState:
@@ -84,9 +92,10 @@ def test_yaw_faces_the_person_from_the_way_point():
 def test_plan_heads_for_d_des_and_h_des_along_the_current_bearing():
     own = on_circle(-60.0, 11.0, 5.0)
     ctrl = controller()
-    for tick in range(120):  # the climb of 3.9 m at the 0.5 m/s bound takes 8 s
-        out = step(ctrl, state(own), now_s=0.1 * tick)
+    out = step(ctrl, state(own))
+    for tick in range(1, 120):  # the climb of 3.9 m at the 0.5 m/s bound takes 8 s
         own = out.plan.positions_m[1]
+        out = step(ctrl, state(own), now_s=0.1 * tick)
     end = out.plan.positions_m[-1]
     assert np.hypot(end[0], end[1]) == pytest.approx(8.0, abs=0.3)
     assert end[2] == pytest.approx(0.9 + 8.0, abs=0.2)
@@ -214,10 +223,9 @@ def test_price_avoids_only_the_teammates_current_position():
 def test_price_aims_at_zero_terminal_velocity():
     walking = person(velocity=(1.0, 0.0, 0.0))
     ctrl = controller(Method.PRICE)
-    own = on_circle(90.0)
-    for tick in range(30):
-        out = step(ctrl, state(own), now_s=0.1 * tick, who=walking)
-        own = out.plan.positions_m[1]
+    out = step(ctrl, state(on_circle(90.0)), who=walking)
+    for tick in range(1, 30):
+        out = step(ctrl, state(out.plan.positions_m[1]), now_s=0.1 * tick, who=walking)
     np.testing.assert_allclose(out.plan.velocities_mps[-1], 0.0, atol=0.05)
 
 
@@ -245,6 +253,7 @@ def test_non_finite_own_state_brakes_with_a_finite_way_point(field, value):
     good = step(ctrl, state(on_circle(0.0, 10.0, 5.0)))
     bad = {"position_m": good.plan.positions_m[1], "velocity_mps": good.plan.velocities_mps[1], field: value}
     out = step(ctrl, state(bad["position_m"], bad["velocity_mps"]), now_s=0.1)
+    assert out.fault is not None
     assert out.status == SolveStatus.BRAKING and "own state" in out.fault
     assert_finite_output(out)
     assert ctrl.stats.rejected_inputs == 1
@@ -258,6 +267,7 @@ def test_non_finite_own_state_on_the_first_tick_still_gives_a_finite_way_point()
 
 def test_non_finite_person_estimate_brakes():
     out = step(controller(), state(on_circle(0.0)), who=person(position=(np.nan, 0.0, 0.9)))
+    assert out.fault is not None
     assert out.status == SolveStatus.BRAKING and "person" in out.fault
     assert_finite_output(out)
 
@@ -272,12 +282,14 @@ def test_non_finite_person_estimate_brakes():
 )
 def test_invalid_formation_parameters_brake(formation):
     out = step(controller(), state(on_circle(0.0)), formation=formation)
+    assert out.fault is not None
     assert out.status == SolveStatus.BRAKING and "formation parameters" in out.fault
     assert_finite_output(out)
 
 
 def test_non_finite_time_brakes():
     out = step(controller(), state(on_circle(0.0)), now_s=float("nan"))
+    assert out.fault is not None
     assert out.status == SolveStatus.BRAKING and "time" in out.fault
     assert_finite_output(out)
 
@@ -310,6 +322,7 @@ def test_solver_failure_falls_back_to_braking():
     stubborn = MpcParams(max_iterations=1, accept_inaccurate=False, polishing=False)
     ctrl = controller(mpc=stubborn)
     out = step(ctrl, state(on_circle(0.0, 12.0, 4.0), (3.0, -2.0, 0.0)))
+    assert out.fault is not None
     assert out.status == SolveStatus.BRAKING and out.fault.startswith("MPC:")
     assert_finite_output(out)
     assert ctrl.stats.braking == 1

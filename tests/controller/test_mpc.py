@@ -1,4 +1,5 @@
-"""Specification of the MPC (controller/mpc.py): paper eqs. (4)-(9), METHOD.md "The MPC" and pitfall 1."""
+"""Specification of the MPC (controller/mpc.py): paper eqs. (4)-(9), docs/method.md#the-mpc and
+docs/method.md#infeasible-qps."""
 
 from __future__ import annotations
 
@@ -88,6 +89,7 @@ def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarr
         tol_ktratio=1e-10,
     )
     assert problem.status == cp.OPTIMAL
+    assert u.value is not None and p.value is not None and v.value is not None
     return u.value, p.value, v.value
 
 
@@ -158,12 +160,14 @@ def compared() -> list[tuple[str, MpcSolution, tuple[np.ndarray, np.ndarray, np.
     return results
 
 
+@pytest.mark.slow  # an independent CVXPY model of 30 random QPs
 def test_matches_cvxpy_inputs(compared):
     errors = [np.max(np.abs(sol.inputs_mps2 - ref[0])) for _, sol, ref in compared]
     assert all(sol.ok and sol.status == "solved" for _, sol, _ in compared)
     assert max(errors) < 1e-3
 
 
+@pytest.mark.slow  # an independent CVXPY model of 30 random QPs
 def test_matches_cvxpy_states(compared):
     errors = [
         max(np.max(np.abs(sol.positions_m - ref[1])), np.max(np.abs(sol.velocities_mps - ref[2])))
@@ -196,6 +200,7 @@ def test_reference_instances_include_saturated_inputs(compared):
     assert sum(saturated) >= 20
 
 
+@pytest.mark.slow  # an independent CVXPY model of 30 random QPs
 def test_max_state_violation_matches_cvxpy_slack(compared):
     """The reported violation is the reference plan's largest excursion beyond the soft bounds."""
     for _, sol, (_, p, v) in compared:
@@ -317,6 +322,7 @@ def test_non_finite_argument_gives_not_ok_with_message(name):
     sol = solve(ModelPredictiveController(PARAMS), **{name: bad})
     assert not sol.ok
     assert sol.status == "invalid_input"
+    assert sol.message is not None
     assert name in sol.message
 
 
@@ -325,6 +331,7 @@ def test_implausibly_large_argument_gives_not_ok():
     sol = solve(ModelPredictiveController(PARAMS), target_position_m=np.array([1e30, 0.0, 6.0]))
     assert not sol.ok
     assert sol.status == "invalid_input"
+    assert sol.message is not None
     assert "target_position_m is implausibly large" in sol.message
 
 
@@ -339,6 +346,7 @@ def test_controller_solves_normally_after_invalid_input():
 def test_indefinite_terminal_weight_is_rejected():
     sol = solve(ModelPredictiveController(PARAMS), terminal_velocity_weight=np.diag([100.0, 100.0, -1.0]))
     assert not sol.ok
+    assert sol.message is not None
     assert "positive semidefinite" in sol.message
 
 
@@ -347,6 +355,7 @@ def test_asymmetric_terminal_weight_is_rejected():
     weight[0, 1] = 5.0
     sol = solve(ModelPredictiveController(PARAMS), terminal_position_weight=weight)
     assert not sol.ok
+    assert sol.message is not None
     assert "symmetric" in sol.message
 
 
@@ -360,6 +369,7 @@ def test_solver_failure_is_not_ok_and_carries_no_numbers():
     sol = solve(ModelPredictiveController(params), target_position_m=np.array([15.0, -12.0, 9.0]))
     assert not sol.ok
     assert sol.status == "maximum iterations reached"
+    assert sol.message is not None
     assert "OSQP" in sol.message and sol.iterations == 10
     assert np.all(np.isnan(sol.inputs_mps2)) and np.all(np.isnan(sol.positions_m))
 

@@ -71,6 +71,7 @@ def _track_errors(t, p, detections) -> tuple[np.ndarray, np.ndarray]:
     for det in detections:
         while g < len(GRID_S) and GRID_S[g] < det.stamp_s:
             est = tracker.estimate(GRID_S[g])
+            assert est is not None
             errors.append(est.position_m - _at(t, p, GRID_S[g]))
             covs.append(est.position_cov_m2)
             g += 1
@@ -155,6 +156,7 @@ def test_first_detection_starts_track_at_it_with_initial_covariance():
     tracker = PersonTracker()
     assert tracker.update(_det(5.0, [1.0, 2.0, 0.9])) is Verdict.ACCEPTED
     est = tracker.estimate(5.0)
+    assert est is not None
     np.testing.assert_array_equal(est.position_m, [1.0, 2.0, 0.9])
     np.testing.assert_array_equal(est.velocity_mps, 0.0)
     np.testing.assert_array_equal(est.cov, np.diag([100.0, 100.0, 10.0, 1.0, 1.0, 0.5]))
@@ -178,6 +180,7 @@ def test_estimate_does_not_change_the_filter():
 # ---------------------------------------------------------------- consistency on a walking person
 
 
+@pytest.mark.slow  # 100 Monte-Carlo runs
 def test_average_position_nees_of_walking_person_lies_in_95_percent_chi_square_interval(walking_runs):
     """Statistics: 20 independent runs x 22 times 5 s apart (after 10 s burn-in) = 440 NEES samples. The
     filter's error decorrelates within about a second (see the next test), so the samples are independent and
@@ -189,6 +192,7 @@ def test_average_position_nees_of_walking_person_lies_in_95_percent_chi_square_i
     assert lo < nees.mean() < hi
 
 
+@pytest.mark.slow  # shares the Monte-Carlo runs above
 def test_nees_samples_five_seconds_apart_are_uncorrelated(walking_runs):
     """Backs the independence assumption of the previous test: lag-1 correlation of NEES on the 5 s grid."""
     _, nees, _ = walking_runs
@@ -196,6 +200,7 @@ def test_nees_samples_five_seconds_apart_are_uncorrelated(walking_runs):
     assert abs(rho) < 0.2
 
 
+@pytest.mark.slow  # shares the Monte-Carlo runs above
 def test_three_mav_fused_track_beats_single_mav_track_on_the_same_data(walking_runs):
     fused, _, single = walking_runs
     rms_fused = np.sqrt(np.mean(np.sum(fused**2, axis=-1)))
@@ -219,6 +224,7 @@ def test_shuffled_detections_within_latency_window_give_same_estimate_as_in_orde
     assert verdicts.count(Verdict.ACCEPTED) == len(dets)
     assert late.stats().out_of_order > 100
     a, b = in_order.estimate(30.0), late.estimate(30.0)
+    assert a is not None and b is not None
     np.testing.assert_allclose(b.position_m, a.position_m, atol=1e-9)
     np.testing.assert_allclose(b.velocity_mps, a.velocity_mps, atol=1e-9)
     np.testing.assert_allclose(b.cov, a.cov, atol=1e-9)
@@ -258,6 +264,7 @@ def _offset_detection(tracker: PersonTracker, stamp: float, sigmas: float) -> De
     """A detection sigmas Mahalanobis units from the prediction, along the innovation's widest axis."""
     cov = np.diag([1.0, 0.2, 0.1])
     pred = tracker.estimate(stamp)
+    assert pred is not None
     S = pred.position_cov_m2 + cov
     w, V = np.linalg.eigh(S)
     return _det(stamp, pred.position_m + sigmas * np.sqrt(w[-1]) * V[:, -1], cov, source=9)
@@ -349,6 +356,7 @@ def test_next_detection_after_expiry_resets_the_track_at_it():
     stamp = dets[-1].stamp_s + 10.5
     assert tracker.update(_det(stamp, [40.0, -3.0, 0.9])) is Verdict.RESET
     est = tracker.estimate(stamp)
+    assert est is not None
     np.testing.assert_array_equal(est.position_m, [40.0, -3.0, 0.9])
     np.testing.assert_array_equal(est.cov, np.diag([100.0, 100.0, 10.0, 1.0, 1.0, 0.5]))
     counts = tracker.stats()

@@ -1,10 +1,12 @@
 """One MAV's loop: tracker fusion, message handling, roles, plan publishing, roster slot, robustness."""
 
 import math
+from typing import cast
 
 import numpy as np
 import pytest
 
+from controller.formation import FormationController
 from controller.messages import Detection, HorizonPlan
 from controller.params import ControllerParams
 from vehicles.agent import Agent, AgentInputs, AgentParams, AgentRole, hold_plan
@@ -18,7 +20,7 @@ def _state(vid=1, t=0.0, pos=(8.0, 0.0, 8.9)):
         vehicle_id=vid,
         stamp_s=t,
         position_m=pos,
-        velocity_mps=(0, 0, 0),
+        velocity_mps=np.array((0, 0, 0)),
         yaw_rad=math.pi,
         armed=True,
         in_air=True,
@@ -150,7 +152,8 @@ class _Recorder:
 
 def test_unheard_teammates_are_stood_in_for_by_phantoms_at_their_slots():
     agent = Agent(vehicle_id=1)
-    agent._controller = spy = _Recorder(agent._controller)
+    spy = _Recorder(agent._controller)
+    agent._controller = cast(FormationController, spy)
     heard = (_plan(2, 0.0, [-4.0, 6.9, 8.9]),)
     agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=heard, roster=ROSTER))
     call = spy.calls[-1]
@@ -165,7 +168,8 @@ def test_unheard_teammates_are_stood_in_for_by_phantoms_at_their_slots():
 
 def test_no_phantoms_and_no_slot_when_every_teammate_is_heard():
     agent = Agent(vehicle_id=1)
-    agent._controller = spy = _Recorder(agent._controller)
+    spy = _Recorder(agent._controller)
+    agent._controller = cast(FormationController, spy)
     mates = (_plan(2, 0.0, [-4.0, 6.9, 8.9]), _plan(3, 0.0, [-4.0, -6.9, 8.9]))
     agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=mates, roster=ROSTER))
     assert spy.calls[-1]["preferred_bearing_rad"] is None
@@ -178,7 +182,9 @@ def test_a_mav_that_lost_the_person_turns_on_the_spot_to_search():
     for i in range(11):
         t = i * 0.1
         out = agent.tick(t, _inputs(t, role=AgentRole.FORMATION))
+        assert out.control is not None
         assert out.control.status.value == "no_person"
+        assert out.setpoint is not None
         yaws.append(out.setpoint.yaw_rad)
     # the command advances at 0.5 rad/s from the MAV's heading (pi), wrapped into [-pi, pi)
     assert np.unwrap(yaws)[-1] - np.unwrap(yaws)[0] == pytest.approx(0.5, abs=1e-9)
@@ -191,17 +197,20 @@ def test_a_controller_exception_is_caught_counted_and_the_mav_holds_where_it_is(
             raise RuntimeError("boom")
 
     agent = Agent(vehicle_id=1)
-    agent._controller = Broken()
+    agent._controller = cast(FormationController, Broken())
     out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),)))
     assert out.counters.controller_errors == 1
+    assert out.fault is not None
     assert "boom" in out.fault
+    assert out.setpoint is not None
     np.testing.assert_allclose(out.setpoint.position_m, [8.0, 0.0, 8.9])
     np.testing.assert_allclose(out.setpoint.velocity_mps, 0.0)
 
 
 def test_with_a_replan_period_the_mpc_is_solved_that_often_and_followed_in_between():
     agent = Agent(vehicle_id=1, agent_params=AgentParams(replan_period_s=0.1))
-    agent._controller = spy = _Recorder(agent._controller)
+    spy = _Recorder(agent._controller)
+    agent._controller = cast(FormationController, spy)
     outs = []
     for i in range(20):
         t = round(i * 0.01, 6)

@@ -9,6 +9,7 @@ from controller.messages import Obstacle
 from vehicles.camera import (
     CameraParams,
     attitude_from_acceleration,
+    body_rotation,
     camera_pose,
     inside_image,
     line_of_sight_clear,
@@ -96,9 +97,9 @@ def test_forward_acceleration_pitches_nose_down_and_leftward_rolls_left_side_dow
 
 
 def test_a_trunk_between_camera_and_person_blocks_the_line_of_sight():
-    trunk = Obstacle(obstacle_id="t", center_m=(4.0, 0.05), radius_m=0.3, height_m=12.0)
-    beside = Obstacle(obstacle_id="b", center_m=(4.0, 1.0), radius_m=0.3, height_m=12.0)
-    short = Obstacle(obstacle_id="s", center_m=(4.0, 0.0), radius_m=0.3, height_m=3.0)
+    trunk = Obstacle(obstacle_id="t", center_m=np.array((4.0, 0.05)), radius_m=0.3, height_m=12.0)
+    beside = Obstacle(obstacle_id="b", center_m=np.array((4.0, 1.0)), radius_m=0.3, height_m=12.0)
+    short = Obstacle(obstacle_id="s", center_m=np.array((4.0, 0.0)), radius_m=0.3, height_m=3.0)
     cam = np.array([8.0, 0.0, 8.9])
     assert not line_of_sight_clear(cam, PERSON, (trunk,))
     assert line_of_sight_clear(cam, PERSON, (beside,))
@@ -107,10 +108,24 @@ def test_a_trunk_between_camera_and_person_blocks_the_line_of_sight():
 
 
 def test_a_blocked_person_is_in_frame_but_not_visible():
-    trunk = Obstacle(obstacle_id="t", center_m=(4.0, 0.0), radius_m=0.3, height_m=12.0)
+    trunk = Obstacle(obstacle_id="t", center_m=np.array((4.0, 0.0)), radius_m=0.3, height_m=12.0)
     view = view_person(
         pose=_looking_at_person(), center_m=PERSON, feet_m=FEET, head_m=HEAD, obstacles=(trunk,)
     )
     assert view.in_frame and not view.visible
     # the principal point (1020.5, 543.5) is half a pixel off the image centre (1020, 543)
     assert view.center_offset_px == pytest.approx(math.sqrt(0.5), abs=1e-6)
+
+
+def test_body_rotation_is_yaw_then_pitch_then_roll_in_the_aviation_sense():
+    yaw, pitch, roll = 0.7, 0.2, -0.3
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    cp, sp = np.cos(-pitch), np.sin(-pitch)
+    cr, sr = np.cos(roll), np.sin(roll)
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    rotation = body_rotation(yaw_rad=yaw, pitch_rad=pitch, roll_rad=roll)
+    np.testing.assert_allclose(rotation, rz @ ry @ rx, atol=1e-12)
+    nose = body_rotation(yaw_rad=0.0, pitch_rad=0.1)[:, 0]
+    assert nose[2] > 0.0  # pitch > 0 lifts the nose

@@ -21,7 +21,7 @@ def state(position, stamp=10.0, vehicle_id=2):
         vehicle_id=vehicle_id,
         stamp_s=stamp,
         position_m=position,
-        velocity_mps=(0, 0, 0),
+        velocity_mps=np.array((0, 0, 0)),
         yaw_rad=0.0,
         armed=True,
         in_air=True,
@@ -98,6 +98,7 @@ class Silenceable:
         self.inner.land()
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_mission_stops_steering_a_silent_vehicle_and_its_teammates_keep_clear_of_it():
     setup = build_sim(Scenario(vehicles=3, seed=2, person="still", trees="none"))
     wrapped = Silenceable(setup.autopilots[1])

@@ -8,7 +8,7 @@ from vehicles.links import LinkParams, SimLinks
 
 
 def _det(source, stamp):
-    return Detection(source_id=source, stamp_s=stamp, position_m=(0, 0, 0.9), cov_m2=np.eye(3))
+    return Detection(source_id=source, stamp_s=stamp, position_m=np.array((0, 0, 0.9)), cov_m2=np.eye(3))
 
 
 def _links(loss=0.0, latency=0.05, jitter=0.0, seed=0, ids=(1, 2, 3)):

@@ -45,6 +45,7 @@ def test_vehicles_take_off_and_join_the_formation_at_the_formation_height():
     assert {v.phase for v in setup.mission.snapshot().vehicles} == {Phase.TAKEOFF}
     _in_formation(setup)
     for v in setup.mission.snapshot().vehicles:
+        assert v.autopilot is not None
         assert v.autopilot.mode == FlightMode.OFFBOARD
         assert v.setpoint is not None and v.plan is not None and v.plan.in_formation
     assert setup.mission.takeoff_height_m() == pytest.approx(8.9)
@@ -55,7 +56,7 @@ def test_with_formation_disabled_idle_vehicles_stay_on_the_ground():
     _run(setup, 0.0, 5.0)
     snap = setup.mission.snapshot()
     assert {v.phase for v in snap.vehicles} == {Phase.IDLE}
-    assert not any(v.autopilot.in_air for v in snap.vehicles)
+    assert not any(v.autopilot is not None and v.autopilot.in_air for v in snap.vehicles)
 
 
 def test_stopping_the_formation_makes_flying_vehicles_hold_within_one_period():
@@ -67,18 +68,22 @@ def test_stopping_the_formation_makes_flying_vehicles_hold_within_one_period():
     assert not setup.mission.snapshot().formation_enabled
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_land_takes_effect_within_one_control_period_and_ends_landed():
     setup = _setup()
     t = _in_formation(setup)
     setup.mission.land(2)
     assert setup.mission.phase(2) == Phase.LANDING
     t = _run(setup, t, 0.1)
-    assert setup.mission.snapshot().vehicles[1].autopilot.mode == FlightMode.LAND
+    landing = setup.mission.snapshot().vehicles[1].autopilot
+    assert landing is not None and landing.mode == FlightMode.LAND
     _run(setup, t, 20.0)
     v = setup.mission.snapshot().vehicles[1]
+    assert v.autopilot is not None
     assert v.phase == Phase.LANDED and not v.autopilot.in_air and not v.autopilot.armed
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_teammates_of_a_landed_mav_respace_to_half_a_circle():
     setup = _setup()
     t = _in_formation(setup, 20.0)
@@ -114,12 +119,16 @@ def test_hold_stops_one_mav_where_it_is_out_of_formation_and_release_brings_it_b
     t = _run(setup, t, 5.0)
     assert np.linalg.norm(held.true_position_m - where) < 0.5  # hovering where it was stopped
     snap = setup.mission.snapshot()
-    assert snap.slot_count == 2 and not snap.vehicles[1].plan.in_formation  # teammates re-space without it
+    plan = snap.vehicles[1].plan
+    assert (
+        plan is not None and not plan.in_formation and snap.slot_count == 2
+    )  # teammates re-space without it
     setup.mission.release(2)
     _run(setup, t, 0.2)
     assert setup.mission.phase(2) == Phase.FORMATION and held.state().mode == FlightMode.OFFBOARD
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_land_all_lands_a_holding_mav_too():
     setup = _setup()
     t = _in_formation(setup)
@@ -137,6 +146,7 @@ def test_holding_a_mav_on_the_ground_is_refused():
         setup.mission.hold(1)
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 def test_a_battery_failsafe_landing_takes_the_mav_out_of_formation_and_ends_landed():
     setup = _setup()
     t = _in_formation(setup)
@@ -148,6 +158,7 @@ def test_a_battery_failsafe_landing_takes_the_mav_out_of_formation_and_ends_land
     assert setup.mission.phase(3) == Phase.LANDED
 
 
+@pytest.mark.slow
 def test_changing_d_des_moves_the_team_to_the_new_distance():
     setup = _setup()
     t = _in_formation(setup, 20.0)
@@ -166,7 +177,9 @@ def test_changing_d_des_moves_the_team_to_the_new_distance():
         (lambda m: m.remove_obstacle("tree-1"), "static obstacle"),
         (lambda m: m.remove_obstacle("nope"), "no virtual obstacle"),
         (
-            lambda m: m.add_obstacle(Obstacle(obstacle_id="tree-2", center_m=(1, 1), radius_m=1)),
+            lambda m: m.add_obstacle(
+                Obstacle(obstacle_id="tree-2", center_m=np.array([1.0, 1.0]), radius_m=1)
+            ),
             "exists already",
         ),
         (lambda m: m.add_obstacle("a box"), "expected an Obstacle"),
@@ -190,7 +203,7 @@ def test_refused_operator_actions_say_why_are_counted_and_change_nothing(action,
 
 def test_virtual_obstacles_are_added_shown_and_removed():
     setup = _setup(trees="paper")
-    box = Obstacle(obstacle_id="v1", center_m=(5.0, 5.0), radius_m=1.0, kind="virtual")
+    box = Obstacle(obstacle_id="v1", center_m=np.array([5.0, 5.0]), radius_m=1.0, kind="virtual")
     setup.mission.add_obstacle(box)
     snap = setup.mission.snapshot()
     assert snap.virtual_obstacle_ids == ("v1",)

@@ -65,8 +65,10 @@ class Live:
     def mean_horizontal_distance_m(self) -> float:
         with self.station.lock:
             snap = self.station.snapshot()
+            assert snap.person_truth is not None
             person = snap.person_truth.position_m[:2]
-            return float(np.mean([np.hypot(*(v.autopilot.position_m[:2] - person)) for v in snap.vehicles]))
+            flying = [v.autopilot.position_m[:2] for v in snap.vehicles if v.autopilot is not None]
+            return float(np.mean([np.hypot(*(p - person)) for p in flying]))
 
     def phases(self) -> set[Phase]:
         return {v.phase for v in self.station.snapshot().vehicles}
@@ -110,16 +112,16 @@ def start_live(
     thread = threading.Thread(target=serve, name="ground-station", daemon=True)
     thread.start()
     assert ready.wait(30.0), "the ground station did not start within 30 s"
-    if "error" in box:
-        raise box["error"]
-    live = Live(
-        station=station,
-        urls=box["urls"],
-        ui=box["ui"],
-        stop=lambda: loop.call_soon_threadsafe(stop_event.set),
-        setup=setup,
-        speed=speed,
-    )
+    error = box.get("error")
+    if isinstance(error, BaseException):
+        raise error
+    urls = box["urls"]
+    assert isinstance(urls, Urls)
+
+    def stop() -> None:
+        loop.call_soon_threadsafe(stop_event.set)
+
+    live = Live(station=station, urls=urls, ui=box["ui"], stop=stop, setup=setup, speed=speed)
     return live, thread
 
 
@@ -200,12 +202,12 @@ def close_page(opened: OpenPage) -> None:
     opened.page.context.close()
 
 
-def scene_canvas(frame: FrameLocator) -> Locator:
+def scene_canvas(frame: FrameLocator | Page) -> Locator:
     """The 3-D canvas of the operator page (three.js renders it; the GUI's plots are canvases too)."""
     return frame.locator('canvas[data-engine^="three.js"]')
 
 
-def number_input(frame: FrameLocator, label: str) -> Locator:
+def number_input(frame: FrameLocator | Page, label: str) -> Locator:
     """The number box of the viser slider or number input labelled `label`."""
     return frame.get_by_text(label, exact=True).locator(
         "xpath=ancestor::div[contains(@class,'mantine-Flex-root')][1]//input[contains(@class,'NumberInput-input')]"

@@ -79,7 +79,9 @@ def spawned() -> Iterator[Spawned]:
     thread.start()
     try:
         assert ready.wait(90.0) and "error" not in box, box.get("error")  # imports are slow on a busy machine
-        yield Spawned(agents=agents, urls=box["urls"], ui=box["ui"], started=time.monotonic())
+        urls = box["urls"]
+        assert isinstance(urls, Urls)
+        yield Spawned(agents=agents, urls=urls, ui=box["ui"], started=time.monotonic())
     finally:
         loop.call_soon_threadsafe(stop.set)
         thread.join(20.0)

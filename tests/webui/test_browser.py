@@ -117,6 +117,7 @@ def click_ground(opened, fraction: tuple[float, float]) -> None:
     the scene moves while a software-rendered browser takes its time)."""
     canvas = scene_canvas(opened.operator)
     size = canvas.bounding_box()
+    assert size is not None
     canvas.click(position={"x": fraction[0] * size["width"], "y": fraction[1] * size["height"]}, force=True)
 
 

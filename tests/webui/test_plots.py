@@ -31,7 +31,9 @@ def view(t: float, *, estimate: bool = True, stale: int | None = None) -> SceneV
         for i in (1, 2)
     )
     cov = np.eye(6) * 0.1
-    person = PersonEstimate(stamp_s=t, position_m=[0, 0, 0.9], velocity_mps=[0, 0, 0], cov=cov)
+    person = PersonEstimate(
+        stamp_s=t, position_m=np.array([0.0, 0.0, 0.9]), velocity_mps=np.zeros(3), cov=cov
+    )
     return SceneView(
         time_s=t,
         vehicles=vehicles,

@@ -51,18 +51,20 @@ def vehicle(vehicle_id: int, *, phase: str = "formation", stale: bool = False) -
 def view(*, obstacles=(), variances=(0.25, 0.04, 0.01), origin=None) -> SceneView:
     full = np.eye(6)
     full[:3, :3] = np.diag(variances)
-    estimate = PersonEstimate(stamp_s=1.0, position_m=[0.5, 0.0, 0.9], velocity_mps=[0.0, 0.0, 0.0], cov=full)
+    estimate = PersonEstimate(
+        stamp_s=1.0, position_m=np.array([0.5, 0.0, 0.9]), velocity_mps=np.array([0.0, 0.0, 0.0]), cov=full
+    )
     return SceneView(
         time_s=1.0,
         vehicles=(vehicle(1), vehicle(2, phase="landing")),
         obstacles=tuple(obstacles),
         formation=FormationParams(),
         formation_enabled=True,
-        arena_min_m=[-20, -20, 3],
-        arena_max_m=[20, 20, 10],
+        arena_min_m=np.array([-20, -20, 3]),
+        arena_max_m=np.array([20, 20, 10]),
         d_des_range_m=Range(1.8, 18.5),
         h_des_range_m=Range(2.1, 9.1),
-        person_truth_m=[0.0, 0.0, 0.9],
+        person_truth_m=np.array([0.0, 0.0, 0.9]),
         person_estimate=estimate,
         estimate_source_id=1,
         tracking_error_m=0.5,
@@ -87,8 +89,8 @@ def test_every_vehicle_gets_a_body_frustum_label_and_plan(scene):
 
 
 def test_trees_and_virtual_obstacles_are_drawn_in_different_colours(scene):
-    tree = Obstacle("t1", [4.0, -9.0], 0.3, 8.0, "tree")
-    virtual = Obstacle("v1", [-5.0, 5.0], 1.5, 12.0, "virtual")
+    tree = Obstacle("t1", np.array([4.0, -9.0]), 0.3, 8.0, "tree")
+    virtual = Obstacle("v1", np.array([-5.0, 5.0]), 1.5, 12.0, "virtual")
     SceneRenderer(scene).draw(view(obstacles=(tree, virtual)))
     drawn_tree = scene.get_handle_by_name("/obstacle/t1")
     drawn_virtual = scene.get_handle_by_name("/obstacle/v1")
@@ -98,7 +100,7 @@ def test_trees_and_virtual_obstacles_are_drawn_in_different_colours(scene):
 
 def test_a_removed_obstacle_disappears(scene):
     renderer = SceneRenderer(scene)
-    renderer.draw(view(obstacles=(Obstacle("v1", [-5.0, 5.0], 1.5, 12.0, "virtual"),)))
+    renderer.draw(view(obstacles=(Obstacle("v1", np.array([-5.0, 5.0]), 1.5, 12.0, "virtual"),)))
     renderer.draw(view())
     assert scene.get_handle_by_name("/obstacle/v1") is None
 
@@ -130,6 +132,7 @@ def test_the_ellipsoid_is_outlined_by_its_three_principal_ellipses_and_its_size_
     centred = outline.points.reshape(-1, 3) - [0.5, 0.0, 0.9]
     # every outline point lies on the 2-sigma ellipsoid: x^2/1^2 + y^2/0.4^2 + z^2/0.2^2 = 1
     assert np.sum((centred / [1.0, 0.4, 0.2]) ** 2, axis=1) == pytest.approx(np.ones(len(centred)), abs=1e-6)
+    assert renderer.ellipsoid_axes_m is not None
     assert sorted(renderer.ellipsoid_axes_m) == pytest.approx([0.4, 0.8, 2.0])
     assert scene.get_handle_by_name("/person/covariance_label").text == "2\u03c3: 2.00 x 0.80 x 0.40 m"
 

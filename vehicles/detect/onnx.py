@@ -2,7 +2,8 @@
 
 skyring ships no ONNX weights (none that run offline come with a permissive licence on PyPI); bring your own,
 e.g. a YOLOv8/YOLO11-pose export (`yolo export model=yolo11n-pose.pt format=onnx`, AGPL-3.0 weights) or an
-RTMPose/RTMO export (Apache-2.0). The contract this back-end reads (docs/detection.md#onnx):
+RTMPose/RTMO export (Apache-2.0). The contract this back-end reads
+(docs/detection.md#onnx-plug-in-vehiclesdetectonnxpy):
 
 - one input, (1, 3, S, S) float32, RGB scaled to [0, 1]; the image is letterboxed into it (aspect kept,
   padded with grey 114);

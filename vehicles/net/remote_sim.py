@@ -30,6 +30,11 @@ from vehicles.world import PersonTruth
 log = logging.getLogger(__name__)
 
 
+def _vec3(values) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
 class RemoteAutopilot:
     """A simulated vehicle served by a world process, behind the `Autopilot` protocol."""
 
@@ -121,7 +126,7 @@ class SimWorldServer:
     def true_positions(self) -> dict[int, tuple[float, float, float]]:
         """Each vehicle's true position now, by id (for tests and metrics)."""
         with self._lock:
-            return {vid: tuple(float(x) for x in a.true_position_m) for vid, a in self._autopilots.items()}
+            return {vid: _vec3(a.true_position_m) for vid, a in self._autopilots.items()}
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name="sim-world", daemon=True)

@@ -17,8 +17,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import msgspec
-
 from vehicles.net import wire
 from vehicles.net.guard import MessageGuard, Received
 from vehicles.net.keys import check_team
@@ -103,8 +101,8 @@ class Bus:
         self.clock = clock
         self.guard = MessageGuard(team=config.team, is_member=is_member, clock=clock)
         self._session = session if session is not None else zenoh.open(config.zenoh_config())
-        self._publishers: dict[str, object] = {}
-        self._subscribers: list[object] = []
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._subscribers: list[zenoh.Subscriber] = []
         self._seq: dict[tuple[int, str], _Counter] = {}
         self._lock = threading.Lock()
         self.sent_bytes = 0
@@ -112,7 +110,7 @@ class Bus:
         self.handler_errors = 0
         self._closed = False
 
-    def publish(self, key: str, body: msgspec.Struct, *, sender: int | None = None) -> int:
+    def publish(self, key: str, body: wire.Body, *, sender: int | None = None) -> int:
         """Stamp and publish `body` on `key`; returns the bytes sent (0 when closed)."""
         sender = self.sender if sender is None else int(sender)
         kind = wire.KIND_OF[type(body)]

@@ -70,6 +70,9 @@ class _Body(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """Base of every body type."""
 
 
+Body = _Body  # the base of every message body, for annotations outside this module
+
+
 class PlanBody(_Body, frozen=True):
     """A horizon plan (controller.messages.HorizonPlan) and the sender's mission phase, which teammates use
     for the roster (phase "takeoff" or "formation" counts)."""

@@ -3,12 +3,12 @@
 One `Px4Autopilot` per vehicle, each with its own `Mavsdk` instance and connection URL. `connect()` waits for
 the autopilot and its health, sets the failsafe parameters skyring relies on (`Px4Config.failsafe_params`),
 and reads the estimator origin; `start()` then runs, on the event loop it was connected on, one reader task
-per telemetry stream into a state cache, a supervisor task (vehicles/px4_supervisor.py: engagement, the
+per telemetry stream into a state cache, a supervisor task (vehicles/px4/supervisor.py: engagement, the
 set-point watchdog, respect for a pilot) and a set-point streaming task. The `Autopilot` methods are
 non-blocking requests, safe to call from any thread.
 
 Frames: the team's ENU frame is converted to the vehicle's local NED frame here and nowhere else
-(vehicles/geodesy.py). Telemetry goes the other way. Link loss (no telemetry for `link_lost_after_s`) is
+(vehicles/px4/geodesy.py). Telemetry goes the other way. Link loss (no telemetry for `link_lost_after_s`) is
 reported in `AutopilotState.link_lost`.
 """
 
@@ -22,6 +22,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
@@ -29,6 +30,15 @@ from controller.messages import frozen_array
 from vehicles.autopilot import AutopilotState, FlightMode, Setpoint
 from vehicles.px4.geodesy import GeodeticPoint, LocalFrame, geodetic_to_enu
 from vehicles.px4.supervisor import Command, Observation, OffboardSupervisor, SupervisorParams
+
+if TYPE_CHECKING:
+    from mavsdk.asyncio import Mavsdk
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.offboard import OffboardAsync
+    from mavsdk.asyncio.plugins.param import ParamAsync
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+_T = TypeVar("_T")
 
 log = logging.getLogger(__name__)
 
@@ -215,7 +225,7 @@ def _geodetic(message) -> GeodeticPoint | None:
 class Px4Status:
     """The back-end's own view of one vehicle, for the ground station and logs.
 
-    engagement: vehicles/px4_supervisor.Engagement value; setpoint_age_s: age of the agent's last set-point;
+    engagement: `vehicles.px4.supervisor.Engagement` value; setpoint_age_s: age of the agent's last set-point;
     counters: set-points ignored (not engaged) or rejected (malformed), land/hold requests not sent because a
     pilot flies the vehicle, watchdog holds/landings, commands PX4 refused or that timed out, telemetry
     readings dropped as malformed; frame_source: "origin" (the estimator
@@ -262,9 +272,12 @@ class Px4Autopilot:
         self._cache = TelemetryCache()
         self._supervisor = OffboardSupervisor(config.supervisor)
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._mavsdk = None
+        self._mavsdk: Mavsdk | None = None
         self._system = None
-        self._telemetry = self._action = self._offboard = self._param = None
+        self._telemetry: TelemetryAsync | None = None
+        self._action: ActionAsync | None = None
+        self._offboard: OffboardAsync | None = None
+        self._param: ParamAsync | None = None
         self._tasks: list[asyncio.Task] = []
         self._frame: LocalFrame | None = None
         self._frame_source: str | None = None
@@ -330,17 +343,24 @@ class Px4Autopilot:
                 )
             await asyncio.sleep(0.1)
 
+    def _connected(self, handle: _T | None) -> _T:
+        """A MAVSDK handle that connect() made; Px4Error (a clear refusal) before connect()."""
+        if handle is None:
+            raise Px4Error(f"vehicle {self.vehicle_id}: not connected")
+        return handle
+
     async def _set_failsafe_params(self) -> None:
         from mavsdk.asyncio.plugins.param import ParamError
 
+        param = self._connected(self._param)
         for name, value in self.config.failsafe_params().items():
             try:
                 if isinstance(value, int):
-                    await self._param.set_param_int(name, value)
-                    readback = await self._param.get_param_int(name)
+                    await param.set_param_int(name, value)
+                    readback = await param.get_param_int(name)
                 else:
-                    await self._param.set_param_float(name, value)
-                    readback = await self._param.get_param_float(name)
+                    await param.set_param_float(name, value)
+                    readback = await param.get_param_float(name)
             except ParamError as exc:
                 raise Px4Error(f"vehicle {self.vehicle_id}: could not set {name} = {value}: {exc}") from exc
             if not math.isclose(readback, value, abs_tol=1e-4):
@@ -350,7 +370,8 @@ class Px4Autopilot:
         from mavsdk.asyncio.plugins.telemetry import TelemetryError
 
         try:
-            origin = await asyncio.wait_for(self._telemetry.get_gps_global_origin(), timeout=5.0)
+            telemetry = self._connected(self._telemetry)
+            origin = await asyncio.wait_for(telemetry.get_gps_global_origin(), timeout=5.0)
         except (TimeoutError, TelemetryError) as exc:
             log.warning(
                 "vehicle %d: no GPS_GLOBAL_ORIGIN (%s); inferring it from a position fix",
@@ -533,11 +554,12 @@ class Px4Autopilot:
     def _accept_setpoint(self, setpoint: Setpoint) -> None:
         if self._supervisor.note_setpoint(self._clock()):
             self._latest_setpoint = setpoint
-            self._setpoint_event.set()
+            if self._setpoint_event is not None:  # none before connect(): nothing streams yet
+                self._setpoint_event.set()
 
     # ---- internals: telemetry readers ---------------------------------------------------------------------
     def _start_readers(self) -> None:
-        t = self._telemetry
+        t, loop = self._connected(self._telemetry), self._connected(self._loop)
         streams = {
             "position_velocity_ned": (t.subscribe_position_velocity_ned, self._on_position_velocity_ned),
             "position": (t.subscribe_position, self._on_position),
@@ -552,9 +574,7 @@ class Px4Autopilot:
         }
         for name, (subscribe, apply) in streams.items():
             self._tasks.append(
-                self._loop.create_task(
-                    self._read(name, subscribe, apply), name=f"px4-{self.vehicle_id}-{name}"
-                )
+                loop.create_task(self._read(name, subscribe, apply), name=f"px4-{self.vehicle_id}-{name}")
             )
 
     async def _read(self, name: str, subscribe: Callable, apply: Callable) -> None:
@@ -697,21 +717,22 @@ class Px4Autopilot:
     async def _command(self, command: Command) -> None:
         from mavsdk.asyncio.plugins.offboard import OffboardError
 
+        action, offboard = self._connected(self._action), self._connected(self._offboard)
         if command is Command.TAKEOFF:
-            await self._action.set_takeoff_altitude(self._takeoff_altitude_m())
-            await self._action.arm()
-            await self._action.takeoff()
+            await action.set_takeoff_altitude(self._takeoff_altitude_m())
+            await action.arm()
+            await action.takeoff()
         elif command is Command.START_OFFBOARD:
             if self._latest_setpoint is not None:
                 await self._forward(self._latest_setpoint)  # MAVSDK refuses to start without a set-point
-            await self._offboard.start()
+            await offboard.start()
         elif command is Command.HOLD:
             try:
-                await self._offboard.stop()  # stops MAVSDK's 20 Hz re-sending, then Hold
+                await offboard.stop()  # stops MAVSDK's 20 Hz re-sending, then Hold
             except OffboardError:
-                await self._action.hold()
+                await action.hold()
         elif command is Command.LAND:
-            await self._action.land()
+            await action.land()
 
     def _takeoff_altitude_m(self) -> float:
         """MIS_TAKEOFF_ALT (above home) that brings the vehicle to the requested team-frame height."""
@@ -725,9 +746,10 @@ class Px4Autopilot:
     async def _stream(self) -> None:
         """Forward the agent's latest set-point while engaged, at most max_setpoint_rate_hz."""
         interval = 1.0 / self.config.max_setpoint_rate_hz
+        event = self._connected(self._setpoint_event)
         while True:
-            await self._setpoint_event.wait()
-            self._setpoint_event.clear()
+            await event.wait()
+            event.clear()
             if not self._supervisor.forwarding or self._latest_setpoint is None:
                 continue
             try:
@@ -741,10 +763,10 @@ class Px4Autopilot:
     async def _forward(self, setpoint: Setpoint) -> None:
         from mavsdk.asyncio.plugins.offboard import PositionNedYaw, VelocityNedYaw
 
-        ned = ned_setpoint(setpoint, self._frame)
+        ned = ned_setpoint(setpoint, self._connected(self._frame))
         n, e, d = (float(x) for x in ned.position_ned_m)
         vn, ve, vd = (float(x) for x in ned.velocity_ned_mps)
-        await self._offboard.set_position_velocity_ned(
+        await self._connected(self._offboard).set_position_velocity_ned(
             PositionNedYaw(n, e, d, ned.yaw_ned_deg), VelocityNedYaw(vn, ve, vd, ned.yaw_ned_deg)
         )
 

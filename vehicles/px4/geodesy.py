@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymap3d
 
+from controller.angles import wrap_angle
 from controller.messages import frozen_array
 
 # ENU <-> NED swaps x and y and flips z; the matrix is its own inverse.
@@ -67,11 +68,6 @@ def ned_to_enu(vectors_ned) -> np.ndarray:
     """(..., 3) NED vectors -> (..., 3) ENU vectors (the same swap: it is its own inverse)."""
     v = np.asarray(vectors_ned, dtype=float)
     return v @ _SWAP.T
-
-
-def wrap_angle(angle_rad: float) -> float:
-    """An angle wrapped into [-pi, pi)."""
-    return float((angle_rad + math.pi) % (2.0 * math.pi) - math.pi)
 
 
 def yaw_enu_to_ned(yaw_enu_rad: float) -> float:

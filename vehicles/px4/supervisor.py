@@ -6,8 +6,8 @@ offboard-loss failsafe; so skyring watches the age of the agent's output itself:
 PX4 (a failsafe) is *released*: skyring stops streaming and does not switch back until re-engaged (takeoff);
 while a pilot flies it (a manual mode) skyring's land and hold requests are not sent either.
 
-Pure and clock-free: the asyncio back-end (vehicles/px4.py) reports set-points and telemetry observations,
-and executes the one `Command` that `step` returns. Engagement:
+Pure and clock-free: the asyncio back-end (vehicles/px4/autopilot.py) reports set-points and telemetry
+observations, and executes the one `Command` that `step` returns. Engagement:
 
     IDLE -takeoff-> TAKING_OFF -in Hold at height-> ENGAGING -pre-streamed-> FOLLOWING
     FOLLOWING -stale output-> WATCHDOG_HOLD -fresh output-> ENGAGING ; -stale longer-> LANDING
@@ -103,7 +103,7 @@ class OffboardSupervisor:
         self.watchdog_holds = 0
         self.watchdog_landings = 0
         self._last_setpoint_s: float | None = None
-        self._stream_start_s: float | None = None
+        self._stream_start_s = -math.inf  # when the current uninterrupted set-point stream began
         self._streamed_since_engaged = False
         self._requests: list[tuple[str, float | None]] = []
         self._last_command: Command | None = None
@@ -317,7 +317,8 @@ class OffboardSupervisor:
         if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD)):
             self._release(obs)
             return None
-        if self._fresh(obs.now_s) and self._last_setpoint_s > self._last_command_s:
+        last_setpoint_s = self._last_setpoint_s
+        if self._fresh(obs.now_s) and last_setpoint_s is not None and last_setpoint_s > self._last_command_s:
             self._engage(obs)  # set-points after the hold: follow them again
             return None
         if self._due_retry(Command.HOLD, obs):

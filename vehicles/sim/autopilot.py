@@ -21,6 +21,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from controller.angles import wrap_angle
 from controller.messages import frozen_array
 from vehicles.autopilot import AutopilotState, FlightMode, Setpoint
 from vehicles.sim.gps_drift import GpsDrift
@@ -56,9 +57,8 @@ class AirframeParams:
     position_std_m: tuple[float, float, float] = (0.5, 0.5, 1.0)  # reported self-localisation std
 
 
-LINK_LOST_AFTER_S = (
-    1.0  # a cut link is flagged lost after this long (PX4 back-end: Px4Config.link_lost_after_s)
-)
+# a cut link is flagged lost after this long (as the PX4 back-end's Px4Config.link_lost_after_s)
+LINK_LOST_AFTER_S = 1.0
 
 
 def _with_link_lost(state: AutopilotState) -> AutopilotState:
@@ -66,10 +66,6 @@ def _with_link_lost(state: AutopilotState) -> AutopilotState:
         **{f.name: getattr(state, f.name) for f in fields(AutopilotState) if f.name != "link_lost"},
         link_lost=True,
     )
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _clip_norm2(x: float, y: float, limit: float) -> tuple[float, float]:
@@ -144,8 +140,8 @@ class SimAutopilot:
             self._state = AutopilotState(
                 vehicle_id=self.vehicle_id,
                 stamp_s=self._t,
-                position_m=(self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]),
-                velocity_mps=(self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]),
+                position_m=np.array([self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]]),
+                velocity_mps=np.array([self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]]),
                 yaw_rad=self._yaw,
                 armed=self._armed,
                 in_air=self._in_air,
@@ -257,7 +253,7 @@ class SimAutopilot:
         return BodyPose(
             vehicle_id=self.vehicle_id,
             stamp_s=self._t,
-            position_m=tuple(self._pos),
+            position_m=np.array(self._pos, dtype=float),
             believed_offset_m=self._drift.offset_m,
             yaw_rad=self._yaw,
             roll_rad=roll,
@@ -385,6 +381,6 @@ class SimAutopilot:
             b = self._believed()
             self._target = [b[0], b[1], self._target[2]]
             self._mode = FlightMode.HOLD
-        err = _wrap(self._yaw_cmd - self._yaw)
+        err = wrap_angle(self._yaw_cmd - self._yaw)
         rate = max(-p.max_yaw_rate_radps, min(p.max_yaw_rate_radps, p.yaw_gain * err))
-        self._yaw = _wrap(self._yaw + rate * dt)
+        self._yaw = wrap_angle(self._yaw + rate * dt)

@@ -1,12 +1,12 @@
 """GPS random-walk drift of a MAV's self-localisation: reported position = true position + offset(t).
 
-METHOD.md "Simulation": an initial offset with std (0.5, 0.5, 1) m that drifts towards a new random target
-every 240 s leg, disturbed by white acceleration noise with std (0.005, 0.005, 0.01). skyring's reading: the
-offset's velocity relaxes (time constant `relax_s`) towards (target - offset) / (leg_s / 2), so the offset
-heads for each leg's target exponentially and never rushes at a leg's end; the noise is white acceleration
-noise of that spectral density (m/s^2 per sqrt(Hz)). The offset stays of the order of the initial std and
-changes smoothly (mm/s to cm/s), as GPS drift does: the noise alone moves it by about
-sigma * relax_s * sqrt(leg_s) = 0.15 m (x, y) over a leg.
+docs/method.md#simulated-world: an initial offset with std (0.5, 0.5, 1) m that drifts towards a new random
+target every 240 s leg, disturbed by white acceleration noise with std (0.005, 0.005, 0.01). skyring's
+reading: the offset's velocity relaxes (time constant `relax_s`) towards (target - offset) / (leg_s / 2), so
+the offset heads for each leg's target exponentially and never rushes at a leg's end; the noise is white
+acceleration noise of that spectral density (m/s^2 per sqrt(Hz)). The offset stays of the order of the initial
+std and changes smoothly (mm/s to cm/s), as GPS drift does: the noise alone moves it by about sigma * relax_s
+* sqrt(leg_s) = 0.15 m (x, y) over a leg.
 """
 
 from __future__ import annotations

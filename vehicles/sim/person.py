@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controller.angles import wrap_angle
 from vehicles.world import PERSON_CENTRE_HEIGHT_M, PersonTruth
 
 STAND_STILL_S = 10.0  # the paper's person stands at the origin for 10 s before walking
@@ -26,8 +27,8 @@ PERSON_MODES = ("paper", "random", "still")  # the models below, by name
 def _truth(t_s: float, xy: np.ndarray, vxy: np.ndarray) -> PersonTruth:
     return PersonTruth(
         stamp_s=t_s,
-        position_m=(float(xy[0]), float(xy[1]), PERSON_CENTRE_HEIGHT_M),
-        velocity_mps=(float(vxy[0]), float(vxy[1]), 0.0),
+        position_m=np.array([xy[0], xy[1], PERSON_CENTRE_HEIGHT_M], dtype=float),
+        velocity_mps=np.array([vxy[0], vxy[1], 0.0], dtype=float),
     )
 
 
@@ -46,7 +47,7 @@ class StillPerson:
 def paper_path(*, radius_m: float = PAPER_PATH_RADIUS_M, points_per_m: float = 4.0) -> np.ndarray:
     """(M, 2) the paper's walk as a dense closed polyline from the origin back to it.
 
-    Shape in units of the radius R (METHOD.md "Simulation", scaled from R = 15 m): a sine
+    Shape in units of the radius R (docs/method.md#simulated-world, scaled from R = 15 m): a sine
     (x, R/3 sin(2 pi x / R)) for x in 0..R; a clockwise arc of radius R about the origin from (R, 0) to
     (0, -R); an oscillating return (R/5 sin(4 pi y / R), y) from y = -R to 0.
     """
@@ -177,16 +178,16 @@ class RandomPerson:
         if self._behaviour_left_s <= 0.0:
             self._next_behaviour()
         self._behaviour_left_s -= dt
-        r = float(np.hypot(*xy))
+        r = float(np.hypot(xy[0], xy[1]))
         if r > p.arena_radius_m - 2.0:
             self._target_heading = math.atan2(-xy[1], -xy[0])
-        err = (self._target_heading - self._heading + np.pi) % (2.0 * np.pi) - np.pi
+        err = wrap_angle(self._target_heading - self._heading)
         self._heading += float(np.clip(err, -p.turn_rate_radps * dt, p.turn_rate_radps * dt))
         dv = np.clip(self._target_speed - self._speed, -p.accel_mps2 * dt, p.accel_mps2 * dt)
         self._speed = float(self._speed + dv)
         v = self._speed * np.array([math.cos(self._heading), math.sin(self._heading)])
         new = xy + v * dt
-        rn = float(np.hypot(*new))
+        rn = float(np.hypot(new[0], new[1]))
         if rn > p.arena_radius_m:
             new = new * (p.arena_radius_m / rn)
         self._xy.append(new)

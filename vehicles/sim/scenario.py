@@ -1,9 +1,10 @@
 """Build the embedded simulation: person, trees, simulated vehicles, cameras, links and the mission over them.
 
-Both the deterministic runner (`server/simulation.py`) and the live ground station build their simulated team
-here, so the two fly the same world. Every random choice comes from one seed, split with numpy's SeedSequence
-into independent streams (person, trees, links, and per vehicle: GPS drift and detector noise), so a given
-seed gives the same world and the same run whatever the number of vehicles asks of the other streams.
+Both the deterministic runner (`server/lab/simulation.py`) and the live ground station build their simulated
+team here, so the two fly the same world. Every random choice comes from one seed, split with numpy's
+SeedSequence into independent streams (person, trees, links, and per vehicle: GPS drift and detector noise),
+so a given seed gives the same world and the same run whatever the number of vehicles asks of the other
+streams.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from controller.messages import Obstacle
-from controller.params import ControllerParams, FormationParams, Method
+from controller.params import MAX_TEAM_SIZE, ControllerParams, FormationParams, Method, ParameterError
 from vehicles.agent import AgentParams
 from vehicles.links import LinkParams, SimLinks
 from vehicles.mission import Mission, MissionParams
@@ -44,12 +45,12 @@ CLUSTER_SPACING_M = 2.5  # neighbours on the launch arc of the "cluster" layout
 class Scenario:
     """The simulated world and team.
 
-    vehicles: K >= 1; seed; method; trees: "paper", "none" or N random; person: paper | random | still;
-    comm_loss in [0, 1]; latency_s: link latency (plus up to jitter_s); start: "ring" (on the ground at the
-    roster slots, d_des from the person, as a crew would set them out) or "cluster" (side by side, 2.5 m
-    apart, south of the person: the team has to spread out); gps_drift: simulate self-localisation drift;
-    virtual_obstacles: "none" or "paper" (the paper's 13 tree positions as the operator's virtual obstacles:
-    avoided like trunks but invisible to the cameras, the paper's SE4).
+    vehicles: K, 1..MAX_TEAM_SIZE; seed >= 0; method; trees: "paper", "none" or N random; person: paper |
+    random | still; comm_loss in [0, 1]; latency_s: link latency (plus up to jitter_s); start: "ring" (on the
+    ground at the roster slots, d_des from the person, as a crew would set them out) or "cluster" (side by
+    side, 2.5 m apart, south of the person: the team has to spread out); gps_drift: simulate self-localisation
+    drift; virtual_obstacles: "none" or "paper" (the paper's 13 tree positions as the operator's virtual
+    obstacles: avoided like trunks but invisible to the cameras, the paper's SE4).
     """
 
     vehicles: int = 3
@@ -67,24 +68,41 @@ class Scenario:
     virtual_obstacles: str = "none"
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.vehicles, int) and 1 <= self.vehicles <= 64):
-            raise ValueError(f"vehicles must be an integer from 1 to 64, got {self.vehicles!r}")
-        if not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
-        object.__setattr__(self, "method", Method(self.method))
-        TreeSpec.parse(self.trees)
-        if self.person not in PERSON_MODES:
-            raise ValueError(f"person must be one of {', '.join(PERSON_MODES)}, got {self.person!r}")
-        if self.start not in START_LAYOUTS:
-            raise ValueError(f"start must be one of {', '.join(START_LAYOUTS)}, got {self.start!r}")
-        if self.virtual_obstacles not in VIRTUAL_OBSTACLE_LAYOUTS:
-            raise ValueError(
-                f"virtual_obstacles must be one of {', '.join(VIRTUAL_OBSTACLE_LAYOUTS)}, "
-                f"got {self.virtual_obstacles!r}"
+        vehicles, seed = self.vehicles, self.seed
+        if isinstance(vehicles, bool) or not isinstance(vehicles, int | np.integer):
+            raise ParameterError("vehicles", f"must be a whole number, got {vehicles!r}")
+        if not 1 <= vehicles <= MAX_TEAM_SIZE:
+            raise ParameterError("vehicles", f"must be from 1 to {MAX_TEAM_SIZE}, got {vehicles}")
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise ParameterError("seed", f"must be a whole number >= 0, got {seed!r}")
+        object.__setattr__(self, "vehicles", int(vehicles))
+        object.__setattr__(self, "seed", int(seed))
+        try:
+            object.__setattr__(
+                self, "method", Method(str(getattr(self.method, "value", self.method)).lower())
             )
-        LinkParams(loss=self.comm_loss, latency_s=self.latency_s, jitter_s=self.jitter_s)
+        except ValueError:
+            choices = ", ".join(m.value for m in Method)
+            raise ParameterError("method", f"must be one of {choices}, got {self.method!r}") from None
+        try:
+            object.__setattr__(self, "trees", str(TreeSpec.parse(self.trees)))
+        except ValueError as exc:
+            raise ParameterError("trees", str(exc).removeprefix("trees ")) from None
+        for name, value, choices in (
+            ("person", self.person, PERSON_MODES),
+            ("start", self.start, START_LAYOUTS),
+            ("virtual_obstacles", self.virtual_obstacles, VIRTUAL_OBSTACLE_LAYOUTS),
+        ):
+            if value not in choices:
+                raise ParameterError(name, f"must be one of {', '.join(choices)}, got {value!r}")
+        if not (isinstance(self.comm_loss, int | float) and 0.0 <= self.comm_loss <= 1.0):
+            raise ParameterError("comm_loss", f"must be a probability in [0, 1], got {self.comm_loss!r}")
+        try:
+            LinkParams(loss=self.comm_loss, latency_s=self.latency_s, jitter_s=self.jitter_s)
+        except ValueError as exc:
+            raise ParameterError("latency_s", str(exc)) from None
         if not (math.isfinite(self.physics_step_s) and 0 < self.physics_step_s <= 0.05):
-            raise ValueError(f"physics_step_s must be in (0, 0.05], got {self.physics_step_s}")
+            raise ParameterError("physics_step_s", f"must be in (0, 0.05], got {self.physics_step_s}")
 
     @property
     def tree_spec(self) -> TreeSpec:
@@ -121,6 +139,7 @@ def start_positions(
         bearings = [-math.pi / 2.0 + (k - (count - 1) / 2.0) * step for k in range(count)]
     out = []
     for b in bearings:
+        xy = person_xy_m + d_des_m * np.array([math.cos(b), math.sin(b)])
         for j in range(41):
             turn = math.radians(2.0 * ((j + 1) // 2) * (1 if j % 2 else -1))
             xy = person_xy_m + d_des_m * np.array([math.cos(b + turn), math.sin(b + turn)])
@@ -135,7 +154,7 @@ def paper_virtual_obstacles() -> tuple[Obstacle, ...]:
     return tuple(
         Obstacle(
             obstacle_id=f"virtual-{i + 1}",
-            center_m=xy,
+            center_m=np.array(xy),
             radius_m=TREE_RADIUS_M,
             height_m=TREE_HEIGHT_M,
             kind="virtual",

@@ -9,7 +9,7 @@ import numpy as np
 
 from controller.messages import Obstacle
 
-# The paper's Gazebo world (METHOD.md "Simulation"), ENU x, y in metres.
+# The paper's Gazebo world (docs/method.md#simulated-world), ENU x, y in metres.
 PAPER_TREES_XY: tuple[tuple[float, float], ...] = (
     (-14.0, -7.0),
     (-15.0, -3.5),
@@ -59,7 +59,13 @@ class TreeSpec:
 def paper_trees(*, radius_m: float = TREE_RADIUS_M, height_m: float = TREE_HEIGHT_M) -> tuple[Obstacle, ...]:
     """The paper's 13 trees, ids tree-1..tree-13."""
     return tuple(
-        Obstacle(obstacle_id=f"tree-{i + 1}", center_m=xy, radius_m=radius_m, height_m=height_m, kind="tree")
+        Obstacle(
+            obstacle_id=f"tree-{i + 1}",
+            center_m=np.array(xy),
+            radius_m=radius_m,
+            height_m=height_m,
+            kind="tree",
+        )
         for i, xy in enumerate(PAPER_TREES_XY)
     )
 
@@ -79,7 +85,7 @@ def random_trees(
     *,
     count: int,
     arena_half_m: float = 19.0,
-    keep_clear: Sequence[tuple[Sequence[float], float]] = (),
+    keep_clear: Sequence[tuple[Sequence[float] | np.ndarray, float]] = (),
     keep_clear_path_xy_m: np.ndarray | None = None,
     path_clearance_m: float = 1.5,
     min_spacing_m: float = 2.0,

@@ -43,7 +43,7 @@ class TelemetryBody:
             vehicle_id=s.vehicle_id,
             stamp_s=s.stamp_s,
             position_m=s.position_m,
-            believed_offset_m=(0.0, 0.0, 0.0),
+            believed_offset_m=np.zeros(3),
             yaw_rad=s.yaw_rad,
             roll_rad=s.roll_rad,
             pitch_rad=s.pitch_rad,

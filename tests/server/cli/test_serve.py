@@ -15,6 +15,8 @@ import pytest
 
 from server.station.live import bind_port
 
+pytestmark = pytest.mark.e2e  # starts `skyring serve` as a process and talks to it over HTTP
+
 ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -35,6 +37,7 @@ def read_until(proc: subprocess.Popen, pattern: str, *, timeout_s: float) -> tup
     seen = ""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
+        assert proc.stdout is not None
         line = proc.stdout.readline()
         if not line:
             break

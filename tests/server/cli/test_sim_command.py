@@ -1,26 +1,19 @@
 """`skyring sim`: arguments, the printed table, the JSON report, one-line errors."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
+from cli_run import run_skyring
 
-from server.cli.sim import START_LAYOUTS
-from vehicles.sim.scenario import START_LAYOUTS as SCENARIO_START_LAYOUTS
-
-SKYRING = [sys.executable, "-c", "from server.cli import main; main()"]
-ROOT = Path(__file__).resolve().parents[3]
-
-
-def _skyring(*args):
-    return subprocess.run([*SKYRING, *args], capture_output=True, text=True, cwd=ROOT, timeout=300)
+from server.cli.options import PersonMode, StartLayout
+from vehicles.sim.person import PERSON_MODES
+from vehicles.sim.scenario import START_LAYOUTS
 
 
-def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
+def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path, capsys):
     path = tmp_path / "report.json"
-    done = _skyring(
+    done = run_skyring(
+        capsys,
         "sim",
         "--headless",
         "--vehicles",
@@ -61,10 +54,12 @@ def test_a_headless_run_prints_a_table_and_writes_the_report(tmp_path):
         (["--person", "dancing"], "--person"),
         (["--warmup", "90", "--duration", "60"], "--warmup"),
         (["--replan-rate", "500"], "--replan-rate"),
+        (["--d-des", "nan"], "--d-des"),
+        (["--start", "circle"], "--start"),
     ],
 )
-def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option):
-    done = _skyring("sim", "--headless", *args)
+def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option, capsys):
+    done = run_skyring(capsys, "sim", "--headless", *args)
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr
@@ -72,11 +67,23 @@ def test_a_bad_argument_exits_non_zero_with_one_line_naming_it(args, option):
     assert done.stdout == ""
 
 
-def test_without_headless_it_points_to_skyring_serve():
-    done = _skyring("sim")
+def test_without_headless_it_points_to_skyring_serve(capsys):
+    done = run_skyring(capsys, "sim")
     assert done.returncode == 2
     assert "skyring serve" in done.stderr and len(done.stderr.strip().splitlines()) == 1
 
 
-def test_the_command_knows_the_same_start_layouts_as_the_scenario():
-    assert START_LAYOUTS == SCENARIO_START_LAYOUTS
+@pytest.mark.parametrize("command", ["sim", "serve"])
+def test_both_commands_refuse_a_seventeenth_vehicle_in_one_line(command, capsys):
+    done = run_skyring(
+        capsys, command, "--vehicles", "17", *(["--headless"] if command == "sim" else ["--no-log"])
+    )
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "Error: Invalid value for '--vehicles': Input should be less than or equal to 16"
+    ]
+
+
+def test_the_command_offers_exactly_the_people_and_start_layouts_the_scenario_knows():
+    assert tuple(m.value for m in PersonMode) == PERSON_MODES
+    assert tuple(s.value for s in StartLayout) == START_LAYOUTS

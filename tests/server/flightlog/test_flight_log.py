@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -40,8 +41,8 @@ _register("replay", COMMANDS["replay"])
 _register("serve", COMMANDS["serve"])
 
 
-def header(**overrides) -> LogHeader:
-    fields = dict(
+def header(**overrides: Any) -> LogHeader:
+    fields: dict[str, Any] = dict(
         command="serve",
         vehicles=3,
         seed=3,
@@ -363,6 +364,7 @@ def test_serve_with_and_without_log_is_refused():
     assert "--log PATH or --no-log, not both" in result.output
 
 
+@pytest.mark.e2e  # starts `skyring serve` as a process
 def test_serve_writes_its_flight_log_where_asked_and_prints_the_path(tmp_path):
     path = tmp_path / "serve.jsonl"
     command = [
@@ -391,6 +393,7 @@ def test_serve_writes_its_flight_log_where_asked_and_prints_the_path(tmp_path):
     )
     try:
         seen = ""
+        assert proc.stdout is not None
         for line in proc.stdout:
             seen += line
             if line.startswith("Ctrl-C"):

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_run import run_skyring
 
 from server.lab import experiments as exp
 from server.lab import figures
@@ -171,6 +172,7 @@ def test_resume_reuses_a_finished_run_only_for_the_same_simulator_config(tmp_pat
         exp.RunResult(spec=spec, report={"config": {}, "metrics": {"in_frame_fraction": 0.5}}), tmp_path
     )
     loaded = exp.load_run(spec, tmp_path)
+    assert loaded is not None and loaded.report is not None
     assert loaded.report["metrics"] == {"in_frame_fraction": 0.5}
     assert exp.load_run(dataclasses.replace(spec, duration_s=spec.duration_s + 1.0), tmp_path) is None
 
@@ -186,6 +188,7 @@ def test_resume_does_not_reuse_a_failed_run(tmp_path):
 
 def test_describe_ignores_non_finite_values_and_gives_quartiles():
     s = rep.describe([4.0, 1.0, math.nan, 3.0, 2.0, math.inf])
+    assert s is not None
     assert s.n == 4
     assert (s.mean, s.median, s.q25, s.q75) == pytest.approx((2.5, 2.5, 1.75, 3.25), abs=1e-12)
     assert s.iqr == pytest.approx(1.5, abs=1e-12)
@@ -193,7 +196,7 @@ def test_describe_ignores_non_finite_values_and_gives_quartiles():
 
 
 def test_describe_of_no_finite_value_is_none():
-    assert rep.describe([math.nan, None]) is None
+    assert rep.describe([math.nan, None, math.inf]) is None
 
 
 def test_flatten_names_nested_metrics_with_dots_and_drops_non_numbers():
@@ -361,7 +364,7 @@ def test_failed_runs_are_counted_and_left_out_of_the_statistics():
     results[0] = exp.RunResult(spec=results[0].spec, report=None, error="RuntimeError: boom")
     s = rep.summarize(p, results)
     assert (s.conditions[0].runs_ok, s.conditions[0].runs_failed) == (1, 1)
-    assert s.conditions[0].stat(rep.ERROR).mean == pytest.approx(2.0, abs=1e-12)
+    assert s.conditions[0].mean(rep.ERROR) == pytest.approx(2.0, abs=1e-12)
 
 
 # ---- report and figures from hand-made runs ----------------------------------------------------------------
@@ -409,11 +412,11 @@ def test_report_puts_one_table_and_the_claims_under_each_family(tmp_path):
 def test_progress_writes_one_line_per_finished_run_when_not_on_a_terminal():
     import io
 
-    from server.cli.experiment import TextProgress
+    from server.cli.experiment import RunProgress
 
     specs = exp.plan_runs([exp.quick_protocol("obstacles")], base_seed=0)[:2]
     stream = io.StringIO()
-    bar = TextProgress(total=2, stream=stream)
+    bar = RunProgress(total=2, stream=stream)
     bar(1, 2, exp.RunResult(spec=specs[0], report={"metrics": {}}))
     bar(2, 2, exp.RunResult(spec=specs[1], report=None, error="boom"))
     lines = stream.getvalue().splitlines()
@@ -472,10 +475,10 @@ def _untimed_metrics(path: Path) -> dict:
     return {k: v for k, v in json.loads(path.read_text())["metrics"].items() if not rep.is_timing(k)}
 
 
-def test_a_run_shorter_than_the_warm_up_is_refused_before_anything_runs(tmp_path):
-    proc = _skyring("methods", "--duration", "10", out=tmp_path)
+def test_a_run_shorter_than_the_warm_up_is_refused_before_anything_runs(tmp_path, capsys):
+    proc = run_skyring(capsys, "experiment", "methods", "--duration", "10", "--out", str(tmp_path))
     assert proc.returncode == 2
-    assert "methods / SE1 price: warmup_s must be >= 0 and below duration_s (10.0)" in proc.stderr
+    assert "methods / SE1 price: warmup_s must be below duration_s (10 s), got 20" in proc.stderr
     assert not list(tmp_path.rglob("run-*.json"))
 
 
@@ -570,7 +573,11 @@ def ordering(tmp_path_factory) -> dict[str, rep.FamilySummary]:
 
 
 def _mean(summary: rep.FamilySummary, metric: str, **settings) -> float:
-    return summary.find(**settings).mean(metric)
+    condition = summary.find(**settings)
+    assert condition is not None, settings
+    mean = condition.mean(metric)
+    assert mean is not None, metric
+    return mean
 
 
 @pytest.mark.slow

@@ -128,7 +128,7 @@ def test_detected_fraction_leaves_out_frames_where_a_trunk_hid_the_person():
 
 def test_minimum_separation_clearance_and_person_distance():
     pos = np.array([[4.0, 2.0, 8.0], [4.0, 4.0, 9.5], [-6.0, 2.0, 8.0]])
-    tree = Obstacle(obstacle_id="t", center_m=(-6.0, 5.0), radius_m=0.5, height_m=12.0)
+    tree = Obstacle(obstacle_id="t", center_m=np.array((-6.0, 5.0)), radius_m=0.5, height_m=12.0)
     m = _metrics([_sample(pos)], obstacles=(tree,))
     assert m["min_separation_m"] == pytest.approx(math.hypot(2.0, 1.5))
     assert m["min_obstacle_clearance_m"] == pytest.approx(2.5)
@@ -137,7 +137,7 @@ def test_minimum_separation_clearance_and_person_distance():
 
 
 def test_a_trunk_lower_than_the_mav_does_not_count_for_clearance():
-    short = Obstacle(obstacle_id="s", center_m=(0.0, 0.0), radius_m=0.3, height_m=5.0)
+    short = Obstacle(obstacle_id="s", center_m=np.array((0.0, 0.0)), radius_m=0.3, height_m=5.0)
     assert obstacle_clearance_m(np.array([[0.5, 0.0, 8.0]]), (short,)) == math.inf
     assert obstacle_clearance_m(np.array([[0.5, 0.0, 4.0]]), (short,)) == pytest.approx(0.2)
 

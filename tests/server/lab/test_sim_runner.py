@@ -1,6 +1,7 @@
 """The deterministic runner: reproducibility, report shape, every method, config validation."""
 
 import json
+from typing import Any
 
 import pytest
 
@@ -105,5 +106,6 @@ def test_bad_configs_are_refused_naming_the_field(kwargs, field):
 
 
 def test_trees_may_be_given_as_a_number():
-    assert SimConfig(trees=7).trees == "7"
+    as_json: dict[str, Any] = {"trees": 7}  # a number, as a JSON config may hold it
+    assert SimConfig(**as_json).trees == "7"
     assert SimConfig(trees="NONE").trees == "none"

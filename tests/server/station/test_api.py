@@ -88,11 +88,13 @@ async def assert_refused(
 
 def horizontal_distances(station: GroundStation) -> np.ndarray:
     snap = station.snapshot()
+    assert snap.person_truth is not None
     person = snap.person_truth.position_m[:2]
     return np.array(
         [
             np.hypot(*(v.autopilot.position_m[:2] - person))
             for v in snap.vehicles
+            if v.autopilot is not None
             if v.phase == Phase.FORMATION
         ]
     )
@@ -100,12 +102,13 @@ def horizontal_distances(station: GroundStation) -> np.ndarray:
 
 def bearings_deg(station: GroundStation, ids) -> np.ndarray:
     snap = station.snapshot()
+    assert snap.person_truth is not None
     person = snap.person_truth.position_m
     return np.array(
         [
             math.degrees(math.atan2(*(v.autopilot.position_m[1::-1] - person[1::-1])))
             for v in snap.vehicles
-            if v.vehicle_id in ids
+            if v.autopilot is not None and v.vehicle_id in ids
         ]
     )
 
@@ -196,6 +199,7 @@ async def test_put_formation_reaches_the_mission_at_once(station):
     assert station.mission.formation.d_des_m == 10.0 and station.mission.formation.h_des_m == 6.5
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 async def test_a_new_d_des_moves_the_team_to_it(flying):
     assert abs(horizontal_distances(flying).mean() - 10.0) > 1.0  # the team has to move to pass
     await client_for(flying).put("/api/formation", json={"d_des_m": 10.0, "h_des_m": 8.0})
@@ -330,6 +334,7 @@ async def test_deleting_a_tree_is_refused_and_changes_nothing(station):
 # ---- landing override --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 async def test_land_takes_one_mav_out_and_its_teammates_respace_to_180_degrees(flying):
     client = client_for(flying)
     response = await client.post("/api/vehicles/2/land")
@@ -351,6 +356,7 @@ async def test_landing_an_unknown_vehicle_is_404_and_changes_nothing(flying):
     )
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 async def test_landing_a_mav_that_is_down_already_is_refused_and_changes_nothing(flying):
     client = client_for(flying)
     await client.post("/api/vehicles/2/land")
@@ -358,6 +364,7 @@ async def test_landing_a_mav_that_is_down_already_is_refused_and_changes_nothing
     await assert_refused(client, "POST", "/api/vehicles/2/land", match="on the ground already")
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 async def test_land_all_brings_every_mav_to_the_ground(flying):
     response = await client_for(flying).post("/api/land_all")
     assert response.json() == {"landing": [1, 2, 3]}
@@ -365,6 +372,7 @@ async def test_land_all_brings_every_mav_to_the_ground(flying):
     assert all(not v.autopilot.in_air for v in flying.snapshot().vehicles)
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 async def test_release_returns_a_landed_mav_to_the_formation(flying):
     client = client_for(flying)
     await client.post("/api/vehicles/3/land")
@@ -382,6 +390,7 @@ async def test_releasing_a_flying_mav_is_refused_and_changes_nothing(flying):
     )
 
 
+@pytest.mark.slow  # flies the team for tens of simulated seconds
 async def test_release_is_refused_when_d_des_is_too_small_for_the_bigger_team():
     s = make_station(vehicles=8)
     run_until(s, all_in_formation, limit_s=40.0)

@@ -90,8 +90,9 @@ def test_a_fresh_agent_is_configured_with_the_station_settings_and_acknowledges(
     fleet, agent = setup
     wait_for(lambda: agent.settings.rev >= 1 and agent.settings.d_des_m == 7.0)
     wait_for(lambda: link(fleet, 1)[1].commands and link(fleet, 1)[1].commands[-1][2] == "acked")
-    vehicle, status = link(fleet, 1)
-    assert not status.lost and vehicle.phase in (Phase.TAKEOFF, Phase.FORMATION)
+    # the ack and the next state report travel separately: wait for the report that shows the takeoff
+    wait_for(lambda: link(fleet, 1)[0].phase in (Phase.TAKEOFF, Phase.FORMATION))
+    assert not link(fleet, 1)[1].lost
 
 
 def test_an_operator_change_is_acknowledged_by_the_agent_and_fails_for_a_silent_one(setup):

@@ -1,12 +1,15 @@
-"""`skyring serve --px4`: vehicle URLs and option checks (server/px4_station.py); the flights themselves are
-in tests/vehicles/test_px4_e2e.py."""
+"""`skyring serve --px4`: vehicle URLs and option checks (server/station/px4.py); the flights themselves are
+in tests/vehicles/px4/test_px4_e2e.py."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import pytest
 import typer
 
 from server.cli.serve import run_px4
+from server.settings import RunSettings
 from server.station.px4 import px4_urls
 
 
@@ -34,16 +37,12 @@ def test_bad_vehicle_lists_are_refused_with_the_reason(kw, message):
         px4_urls(**kw)
 
 
-def _run(**overrides):
-    kw = dict(
+def _run(**overrides: Any) -> None:
+    kw: dict[str, Any] = dict(
         px4=[],
         sitl=0,
         origin=None,
-        seed=0,
-        method="active",
-        person="still",
-        trees="none",
-        rate_hz=20.0,
+        settings=RunSettings(person="still", trees="none", rate_hz=20.0),
         host="127.0.0.1",
         port=0,
         viser_port=0,

@@ -27,8 +27,8 @@ class StubAutopilot:
             return AutopilotState(
                 vehicle_id=self.vehicle_id,
                 stamp_s=time.time(),
-                position_m=(8.0, 0.0, self.height),
-                velocity_mps=(0, 0, 0),
+                position_m=np.array([8.0, 0.0, self.height]),
+                velocity_mps=np.zeros(3),
                 yaw_rad=np.pi,
                 armed=flying,
                 in_air=flying,

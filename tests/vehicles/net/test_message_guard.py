@@ -46,8 +46,8 @@ def test_telemetry_and_detections_round_trip():
     state = AutopilotState(
         vehicle_id=1,
         stamp_s=3.5,
-        position_m=(1, 2, 3),
-        velocity_mps=(0.1, 0.2, 0.3),
+        position_m=np.array([1.0, 2.0, 3.0]),
+        velocity_mps=np.array([0.1, 0.2, 0.3]),
         yaw_rad=0.4,
         armed=True,
         in_air=True,
@@ -56,7 +56,7 @@ def test_telemetry_and_detections_round_trip():
     )
     back = wire.telemetry_from_wire(wire.telemetry_to_wire(state), vehicle_id=1)
     assert np.allclose(back.position_m, state.position_m) and back.mode is FlightMode.OFFBOARD
-    det = Detection(source_id=1, stamp_s=2.0, position_m=(4, 5, 0.9), cov_m2=np.eye(3) * 0.3)
+    det = Detection(source_id=1, stamp_s=2.0, position_m=np.array([4.0, 5.0, 0.9]), cov_m2=np.eye(3) * 0.3)
     again = wire.detection_from_wire(wire.detection_to_wire(det), source_id=1)
     assert np.allclose(again.cov_m2, det.cov_m2) and again.stamp_s == 2.0
 
@@ -144,7 +144,8 @@ def test_non_finite_plan_values_are_refused_by_the_conversion():
 
 
 def test_keys_parse_back_and_reject_strangers():
-    assert parse_key("skyring/alpha/agent/12/plan").vehicle_id == 12
-    assert parse_key("skyring/alpha/station/heartbeat").role == "station"
+    agent, station = parse_key("skyring/alpha/agent/12/plan"), parse_key("skyring/alpha/station/heartbeat")
+    assert agent is not None and agent.vehicle_id == 12
+    assert station is not None and station.role == "station"
     assert parse_key("skyring/alpha/agent/x/plan") is None
     assert parse_key("other/alpha/agent/1/plan") is None

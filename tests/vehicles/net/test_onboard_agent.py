@@ -27,6 +27,12 @@ from net_stubs import StubAutopilot  # noqa: E402
 TEAM = "unit"
 
 
+def ack_of(received: Received) -> wire.AckBody:
+    """The acknowledgement a received message carries (anything else on the ack key is a test failure)."""
+    assert isinstance(received.body, wire.AckBody), received.body
+    return received.body
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -138,16 +144,16 @@ def test_commands_are_acknowledged_each_time_but_applied_once_and_bad_settings_a
             station.publish(station_key(TEAM, "command"), body)
 
     now = time.time()
-    wait_for(lambda: (agent.step(now), {a.body.command_id for a in acks} == {1, 2})[1], resend=send)
+    wait_for(lambda: (agent.step(now), {ack_of(a).command_id for a in acks} == {1, 2})[1], resend=send)
     count = len(acks)
-    outcome = {a.body.command_id: (a.body.accepted, a.body.message) for a in acks}
+    outcome = {ack_of(a).command_id: (ack_of(a).accepted, ack_of(a).message) for a in acks}
     assert outcome[1][0] is False and "d_des_m" in outcome[1][1]
     assert outcome[2] == (True, "")
     assert agent.settings.d_des_m == 6.0 and agent.refused_commands == 1
     # The station re-sends command 2 (its ack was lost, say): acknowledged again, applied once.
     station.publish(station_key(TEAM, "command"), command(2, "configure", settings=good))
     wait_for(lambda: (agent.step(now), len(acks) > count)[1])
-    assert acks[-1].body.accepted and agent.refused_commands == 1
+    assert ack_of(acks[-1]).accepted and agent.refused_commands == 1
     assert agent.phase in (Phase.TAKEOFF, Phase.FORMATION) and autopilot.height > 0  # enabled: it took off
 
 
@@ -182,7 +188,7 @@ def test_a_hold_command_stops_a_flying_mav_and_release_brings_it_back(buses):
 
     def acked(command_id: int) -> bool:
         agent.step(now)
-        return any(a.body.command_id == command_id for a in acks)
+        return any(ack_of(a).command_id == command_id for a in acks)
 
     wait_for(
         lambda: acked(1),
@@ -196,7 +202,7 @@ def test_a_hold_command_stops_a_flying_mav_and_release_brings_it_back(buses):
     wait_for(
         lambda: acked(2), resend=lambda: station.publish(station_key(TEAM, "command"), command(2, "hold"))
     )
-    assert agent.phase is Phase.HOLDING and [a.body.accepted for a in acks if a.body.command_id == 2][0]
+    assert agent.phase is Phase.HOLDING and [ack_of(a).accepted for a in acks if ack_of(a).command_id == 2][0]
     wait_for(
         lambda: acked(3), resend=lambda: station.publish(station_key(TEAM, "command"), command(3, "release"))
     )

@@ -1,4 +1,5 @@
-"""The PX4 back-end's pure parts: set-point construction, mode reading, configuration (vehicles/px4.py)."""
+"""The PX4 back-end's pure parts: set-point construction, mode reading, configuration
+(vehicles/px4/autopilot.py)."""
 
 from __future__ import annotations
 
@@ -85,11 +86,11 @@ def test_check_setpoint_accepts_a_setpoint_near_the_team():
 
 
 def test_check_setpoint_refuses_a_far_setpoint_with_the_distance():
-    assert "2500 m" in check_setpoint(setpoint([2500.0, 0.0, 0.0]), max_range_m=2000.0)
+    assert "2500 m" in str(check_setpoint(setpoint([2500.0, 0.0, 0.0]), max_range_m=2000.0))
 
 
 def test_check_setpoint_refuses_what_is_not_a_setpoint():
-    assert "expected a Setpoint" in check_setpoint((1.0, 2.0, 3.0), max_range_m=2000.0)
+    assert "expected a Setpoint" in str(check_setpoint((1.0, 2.0, 3.0), max_range_m=2000.0))
 
 
 def test_sitl_urls_follow_px4_instance_ports():
@@ -125,6 +126,7 @@ def test_unconnected_autopilot_has_no_state_and_refuses_commands_without_raising
     status = a.status()
     assert status.rejected_setpoints == 1
     assert status.failed_commands == 1
+    assert status.fault is not None
     assert "not connected" in status.fault
 
 
@@ -133,4 +135,4 @@ def test_takeoff_height_out_of_range_is_refused_and_counted():
     a.takeoff(float("nan"))
     a.takeoff(500.0)
     assert a.status().failed_commands == 2
-    assert "[0.5, 120]" in a.status().fault
+    assert "[0.5, 120]" in str(a.status().fault)

@@ -1,5 +1,5 @@
 """End to end: three PX4 test peers and the ground station of `skyring serve --px4`, in-process through the
-same code path as the command (server/px4_station.serve_px4), driven through its REST API."""
+same code path as the command (server/station/px4.py, `serve_px4`), driven through its REST API."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from vehicles.px4.geodesy import GeodeticPoint, geodetic_to_enu  # noqa: E402
 from vehicles.px4.supervisor import SupervisorParams  # noqa: E402
 from webui.cards import team_table_html  # noqa: E402
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.e2e
 
 REF = GeodeticPoint(47.397742, 8.545594, 488.0)
 D_DES_M = 8.0  # the formation default; the still person stands at the team origin

@@ -18,8 +18,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # tests/, for the 
 
 from px4_peer import PeerMode, Px4Peer, free_udp_port, setpoint_problems  # noqa: E402
 
-from vehicles.autopilot import FlightMode, Setpoint  # noqa: E402
-from vehicles.px4.autopilot import Px4Config, Px4Error, Px4Fleet  # noqa: E402
+from vehicles.autopilot import AutopilotState, FlightMode, Setpoint  # noqa: E402
+from vehicles.px4.autopilot import Px4Autopilot, Px4Config, Px4Error, Px4Fleet  # noqa: E402
 from vehicles.px4.geodesy import GeodeticPoint, geodetic_to_enu  # noqa: E402
 from vehicles.px4.supervisor import SupervisorParams  # noqa: E402
 
@@ -42,12 +42,19 @@ def home_at(east_m: float, north_m: float, up_m: float = 0.0) -> tuple[float, fl
     return lat, lon, REF.altitude_m + up_m
 
 
+def state_of(autopilot: Px4Autopilot) -> AutopilotState:
+    """The autopilot's latest state; a connected vehicle always has one."""
+    state = autopilot.state()
+    assert state is not None, f"vehicle {autopilot.vehicle_id} has no state"
+    return state
+
+
 def truth_enu(peer: Px4Peer) -> np.ndarray:
     return geodetic_to_enu(GeodeticPoint(*peer.geodetic()), reference=REF)
 
 
 @contextlib.asynccontextmanager
-async def px4_fleet(homes, *, team_origin=REF, config=CONFIG, **peer_kw):
+async def px4_fleet(homes, *, team_origin: GeodeticPoint | None = REF, config=CONFIG, **peer_kw):
     mavsdk.log_subscribe(lambda *a: True)
     ports = [free_udp_port() for _ in homes]
     peers = [
@@ -92,7 +99,7 @@ class StandInAgent:
                     Setpoint(
                         stamp_s=time.monotonic(),
                         position_m=self.target_m,
-                        velocity_mps=(0.0, 0.0, 0.0),
+                        velocity_mps=np.array((0.0, 0.0, 0.0)),
                         yaw_rad=self.yaw_rad,
                     )
                 )
@@ -131,6 +138,7 @@ async def test_setpoints_fly_the_vehicle_to_the_enu_target_in_offboard():
         state = a.state()
         agent.stop()
         assert peer.mode is PeerMode.OFFBOARD
+        assert state is not None
         assert state.mode is FlightMode.OFFBOARD
         np.testing.assert_allclose(state.position_m, truth_enu(peer), atol=0.1)
         assert state.yaw_rad == pytest.approx(math.pi / 2, abs=0.05)
@@ -162,14 +170,14 @@ async def test_frozen_agent_puts_the_vehicle_in_hold_within_a_second_then_lands(
 async def test_silent_vehicle_is_flagged_link_lost_within_1_5_s_and_recovers():
     async with px4_fleet([home_at(0, 0)]) as (fleet, (peer,)):
         a = fleet.autopilots[0]
-        assert not a.state().link_lost
-        before = a.state().position_m
+        assert not state_of(a).link_lost
+        before = state_of(a).position_m
         peer.silence()
-        took = await wait_until(lambda: a.state().link_lost, timeout_s=3.0, what="LINK_LOST")
+        took = await wait_until(lambda: state_of(a).link_lost, timeout_s=3.0, what="LINK_LOST")
         assert 0.9 < took < 1.5
-        np.testing.assert_allclose(a.state().position_m, before, atol=0.01)  # the last known position
+        np.testing.assert_allclose(state_of(a).position_m, before, atol=0.01)  # the last known position
         peer.silence(False)
-        await wait_until(lambda: not a.state().link_lost, timeout_s=2.0, what="link recovery")
+        await wait_until(lambda: not state_of(a).link_lost, timeout_s=2.0, what="link recovery")
 
 
 async def test_pilot_taking_over_is_respected_and_shown():
@@ -178,9 +186,9 @@ async def test_pilot_taking_over_is_respected_and_shown():
         agent = await engaged(a, np.array([0.0, 3.0, 5.0]))
         peer.pilot_takeover(PeerMode.POSCTL)
         taken_at = peer.now()
-        await wait_until(lambda: a.state().released, timeout_s=3.0, what="release")
-        assert a.state().mode is FlightMode.MANUAL
-        assert "manual" in a.status().released_reason
+        await wait_until(lambda: state_of(a).released, timeout_s=3.0, what="release")
+        assert state_of(a).mode is FlightMode.MANUAL
+        assert "manual" in str(a.status().released_reason)
         await asyncio.sleep(5.0)  # the agent keeps sending; skyring must not take control back
         agent.stop()
         assert peer.mode is PeerMode.POSCTL
@@ -197,7 +205,7 @@ async def test_vehicles_with_different_homes_share_one_enu_frame():
         ref = fleet.reference
         for a, peer in zip(fleet.autopilots, peers, strict=True):
             truth = geodetic_to_enu(GeodeticPoint(*peer.geodetic()), reference=ref)
-            np.testing.assert_allclose(a.state().position_m, truth, atol=0.1)
+            np.testing.assert_allclose(state_of(a).position_m, truth, atol=0.1)
 
 
 async def test_team_origin_defaults_to_vehicle_1_home():
@@ -209,9 +217,9 @@ async def test_team_origin_defaults_to_vehicle_1_home():
             pytest.approx(home1.longitude_deg, abs=1e-6),
             pytest.approx(home1.altitude_m, abs=0.01),
         )
-        np.testing.assert_allclose(fleet.autopilots[0].state().position_m, [0.0, 0.0, 0.0], atol=0.05)
+        np.testing.assert_allclose(state_of(fleet.autopilots[0]).position_m, [0.0, 0.0, 0.0], atol=0.05)
         truth2 = geodetic_to_enu(GeodeticPoint(*peers[1].geodetic()), reference=home1)
-        np.testing.assert_allclose(fleet.autopilots[1].state().position_m, truth2, atol=0.1)
+        np.testing.assert_allclose(state_of(fleet.autopilots[1]).position_m, truth2, atol=0.1)
         np.testing.assert_allclose(truth2, [-40.0, -15.0, -2.0], atol=0.5)
 
 
@@ -220,7 +228,7 @@ async def test_vehicle_that_booted_away_from_home_is_placed_by_its_estimator_ori
     booted = home_at(-20.0, 30.0, -1.0)
     async with px4_fleet([home_at(12.0, -7.0, 0.5)], origin=booted) as (fleet, (peer,)):
         assert np.linalg.norm(peer.position_ned) > 40.0  # far from its local origin
-        np.testing.assert_allclose(fleet.autopilots[0].state().position_m, truth_enu(peer), atol=0.1)
+        np.testing.assert_allclose(state_of(fleet.autopilots[0]).position_m, truth_enu(peer), atol=0.1)
 
 
 async def test_ground_station_loss_lands_the_vehicle_by_px4s_offboard_failsafe():
@@ -247,4 +255,4 @@ async def test_vehicle_that_hides_its_origin_is_placed_from_a_position_fix():
     async with px4_fleet([home_at(25.0, -15.0, 2.0)], answers_origin=False) as (fleet, (peer,)):
         a = fleet.autopilots[0]
         assert a.status().frame_source == "fix"
-        np.testing.assert_allclose(a.state().position_m, truth_enu(peer), atol=0.1)
+        np.testing.assert_allclose(state_of(a).position_m, truth_enu(peer), atol=0.1)

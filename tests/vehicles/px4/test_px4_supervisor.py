@@ -1,4 +1,5 @@
-"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release (vehicles/px4_supervisor)."""
+"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release
+(vehicles/px4/supervisor.py)."""
 
 from __future__ import annotations
 
@@ -102,6 +103,7 @@ def test_pilot_mode_change_releases_without_fighting():
     cmds = run(sup, t, t + 5.0, FlightMode.MANUAL)
     assert cmds == []
     assert sup.engagement is Engagement.RELEASED
+    assert sup.released_reason is not None
     assert "manual" in sup.released_reason
     assert not sup.forwarding
     assert not sup.note_setpoint(t + 5.0)

@@ -59,7 +59,14 @@ def test_takeoff_climbs_to_the_height_and_holds_there():
 
 def test_setpoints_on_the_ground_are_refused_and_counted():
     ap = _vehicle()
-    _run(ap, 0.0, 1.0, lambda t: Setpoint(stamp_s=t, position_m=(5, 0, 5), velocity_mps=(0, 0, 0), yaw_rad=0))
+    _run(
+        ap,
+        0.0,
+        1.0,
+        lambda t: Setpoint(
+            stamp_s=t, position_m=np.array((5, 0, 5)), velocity_mps=np.array((0, 0, 0)), yaw_rad=0
+        ),
+    )
     assert ap.state().position_m == pytest.approx(np.zeros(3))
     assert ap.refused_commands == 100
 
@@ -69,7 +76,10 @@ def test_offboard_step_settles_within_limits():
     start = ap.true_position_m
     goal = start + np.array([10.0, 0.0, 0.0])
     t, log = _run(
-        ap, t, 15.0, lambda t: Setpoint(stamp_s=t, position_m=goal, velocity_mps=(0, 0, 0), yaw_rad=0.0)
+        ap,
+        t,
+        15.0,
+        lambda t: Setpoint(stamp_s=t, position_m=goal, velocity_mps=np.array((0, 0, 0)), yaw_rad=0.0),
     )
     assert ap.state().mode == FlightMode.OFFBOARD
     np.testing.assert_allclose(ap.true_position_m, goal, atol=0.05)
@@ -105,7 +115,12 @@ def test_tracking_a_circle_lags_like_a_real_position_controller(speed, low, high
 def test_lost_setpoint_stream_falls_back_to_hold_after_half_a_second():
     ap, t = _airborne()
     goal = ap.true_position_m + np.array([1.0, 0.0, 0.0])
-    t, _ = _run(ap, t, 1.0, lambda t: Setpoint(stamp_s=t, position_m=goal, velocity_mps=(0, 0, 0), yaw_rad=0))
+    t, _ = _run(
+        ap,
+        t,
+        1.0,
+        lambda t: Setpoint(stamp_s=t, position_m=goal, velocity_mps=np.array((0, 0, 0)), yaw_rad=0),
+    )
     assert ap.state().mode == FlightMode.OFFBOARD
     t, log = _run(ap, t, 1.0)
     modes = [s.mode for _, _, s in log]
@@ -127,7 +142,14 @@ def test_land_descends_at_land_speed_and_disarms_on_the_ground():
 def test_setpoints_during_landing_are_refused():
     ap, t = _airborne(5.0)
     ap.land()
-    _run(ap, t, 1.0, lambda t: Setpoint(stamp_s=t, position_m=(0, 0, 8), velocity_mps=(0, 0, 0), yaw_rad=0))
+    _run(
+        ap,
+        t,
+        1.0,
+        lambda t: Setpoint(
+            stamp_s=t, position_m=np.array((0, 0, 8)), velocity_mps=np.array((0, 0, 0)), yaw_rad=0
+        ),
+    )
     assert ap.state().mode == FlightMode.LAND
     assert ap.refused_commands == 100
 
@@ -139,7 +161,9 @@ def test_yaw_follows_the_command_at_no_more_than_60_degrees_per_second():
         ap,
         t,
         4.0,
-        lambda t: Setpoint(stamp_s=t, position_m=here, velocity_mps=(0, 0, 0), yaw_rad=math.pi - 0.01),
+        lambda t: Setpoint(
+            stamp_s=t, position_m=here, velocity_mps=np.array((0, 0, 0)), yaw_rad=math.pi - 0.01
+        ),
     )
     yaws = np.unwrap([s.yaw_rad for _, _, s in log])
     assert np.max(np.abs(np.diff(yaws))) / DT <= math.radians(60.0) + 1e-9
@@ -151,7 +175,9 @@ def test_battery_drains_by_one_twentieth_per_minute_in_the_air():
     ap, t = _airborne()
     before = ap.state().battery_fraction
     _run(ap, t, 60.0)
-    assert before - ap.state().battery_fraction == pytest.approx(60.0 / 1200.0, rel=1e-6)
+    after = ap.state().battery_fraction
+    assert before is not None and after is not None
+    assert before - after == pytest.approx(60.0 / 1200.0, rel=1e-6)
 
 
 def test_reported_position_is_the_true_one_plus_the_gps_drift():
@@ -177,7 +203,12 @@ def test_hold_keeps_the_believed_position_so_the_true_one_drifts_with_the_gps():
 def test_accelerating_forward_pitches_the_body_nose_down():
     ap, t = _airborne()
     goal = ap.state().position_m + np.array([20.0, 0.0, 0.0])
-    _run(ap, t, 0.5, lambda t: Setpoint(stamp_s=t, position_m=goal, velocity_mps=(0, 0, 0), yaw_rad=0.0))
+    _run(
+        ap,
+        t,
+        0.5,
+        lambda t: Setpoint(stamp_s=t, position_m=goal, velocity_mps=np.array((0, 0, 0)), yaw_rad=0.0),
+    )
     s = ap.state()
     assert s.pitch_rad < -math.radians(10.0)
     assert abs(s.roll_rad) < 1e-6
@@ -202,7 +233,9 @@ def test_at_the_failsafe_level_the_battery_failsafe_lands_the_vehicle_out_of_sky
     assert s.mode == FlightMode.LAND and s.released
     assert s.failsafe == "battery 15 % at or below 15 %: landing"
     assert ap.failsafe_landings == 1
-    ap.send_setpoint(Setpoint(stamp_s=t, position_m=(0, 0, 9), velocity_mps=(0, 0, 0), yaw_rad=0.0))
+    ap.send_setpoint(
+        Setpoint(stamp_s=t, position_m=np.array([0.0, 0.0, 9.0]), velocity_mps=np.zeros(3), yaw_rad=0.0)
+    )
     assert ap.state().mode == FlightMode.LAND  # the failsafe has it: set-points are refused
     t, _ = _run(ap, t, 20.0)
     s = ap.state()

@@ -106,7 +106,7 @@ def test_detections_are_shifted_by_the_mavs_own_gps_drift():
 
 
 def test_a_trunk_in_the_line_of_sight_hides_the_person_from_the_detector():
-    trunk = Obstacle(obstacle_id="t", center_m=(4.0, 0.0), radius_m=0.3)
+    trunk = Obstacle(obstacle_id="t", center_m=np.array((4.0, 0.0)), radius_m=0.3)
     world, aps = _world(obstacles=(trunk,))
     t = _airborne(world, aps)
     _fly(world, aps, t + 5.0, t0=t)
