@@ -11,7 +11,7 @@ POSE_REQS := vehicles/detect/pose-requirements.txt
 POSE_PYTHON ?= $(shell for p in python3.12 python3.11; do command -v $$p >/dev/null 2>&1 && $$p -c 'import venv' 2>/dev/null && { echo $$p; break; }; done)
 FOOTAGE := /usr/share/doc/opencv-doc/examples/data/vtest.avi
 
-.PHONY: run test check bench lint chromium footage pose-env clean
+.PHONY: run test test-px4 check bench lint chromium footage pose-env clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,7 +40,18 @@ run: $(STAMP)
 	$(VENV)/bin/skyring serve
 
 test: $(STAMP) chromium footage $(POSE_STAMP)
-	$(PY) -m pytest -q -ra -n auto --durations=15
+	$(PY) -m pytest -q -ra -n auto --durations=15 -m "not px4_sitl"
+
+# The PX4 scenarios against real PX4 SITL (SIH): PX4_SITL=path/to/build/px4_sitl_default/bin/px4 (docs/px4.md
+# says how to build it). One scenario at a time: each starts and stops its own PX4 instances.
+test-px4: $(STAMP)
+	@if [ -z "$(PX4_SITL)" ]; then \
+		echo "make test-px4 needs a PX4 SITL build: make test-px4 PX4_SITL=path/to/build/px4_sitl_default/bin/px4"; \
+		echo "(PX4 v1.16.0, SIH; docs/px4.md, 'Testing against real PX4', says how to build one)"; \
+		exit 2; \
+	fi
+	@[ -x "$(PX4_SITL)" ] || { echo "PX4_SITL=$(PX4_SITL) is not an executable PX4 binary"; exit 2; }
+	PX4_SITL="$(abspath $(PX4_SITL))" $(PY) -m pytest -q -rP -p no:xdist -m px4_sitl --durations=0 tests/vehicles/px4
 
 # The fast part: no closed-loop runs, browser or end-to-end tests (they run in `make test` and CI).
 check: $(STAMP) footage $(POSE_STAMP)

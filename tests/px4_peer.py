@@ -5,13 +5,22 @@ One `Px4Peer` is one multicopter autopilot: it sends to the ground station's por
 in a daemon thread in real time, as MAVSDK needs.
 
 What it does, the way PX4 v1.16 does it:
-- HEARTBEAT (1 Hz) with autopilot PX4, armed flag, and the PX4 custom mode: main mode in bits 16-23, AUTO
-  sub-mode in bits 24-31 (e.g. Hold = AUTO/LOITER = 4/3, Offboard = 6/0, Position = 3/0);
+- HEARTBEAT (1 Hz) with autopilot PX4, armed flag, the PX4 custom mode (main mode in bits 16-23, AUTO
+  sub-mode in bits 24-31, e.g. Hold = AUTO/LOITER = 4/3, Offboard = 6/0, Position = 3/0) and PX4's system
+  status: STANDBY disarmed and able to arm, UNINIT disarmed and unable to, ACTIVE armed, CRITICAL armed in a
+  failsafe;
+- modes as PX4 keeps them: the mode asked for (the user's intention) and, on top of it, a failsafe's mode; a
+  mode change by the ground station or a pilot ends a failsafe; after every disarm the vehicle returns to the
+  last mode asked for that allows arming (Offboard after an offboard flight, never Land or Return);
+- arming checks: arming is denied, with PX4's STATUSTEXT "Arming denied: Resolve system health failures
+  first", when COM_ARMABLE is 0 or the mode asked for is Offboard without a set-point stream (the SYS_STATUS
+  pre-arm bit and the heartbeat say so beforehand);
 - LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION at `rate_hz`; EXTENDED_SYS_STATE
   (landed state); SYS_STATUS (sensor health bits, pre-arm check, battery); GPS_RAW_INT (accuracy);
   HOME_POSITION (home resets at every arming; the local NED origin stays where it booted); GPS_GLOBAL_ORIGIN
   and AUTOPILOT_VERSION on request;
-- COMMAND_LONG / COMMAND_INT with COMMAND_ACK: arm/disarm, NAV_TAKEOFF (to MIS_TAKEOFF_ALT, then Hold),
+- COMMAND_LONG / COMMAND_INT with COMMAND_ACK: arm/disarm, NAV_TAKEOFF (Takeoff mode, accepted disarmed too;
+  once armed it climbs to MIS_TAKEOFF_ALT, then Hold),
   NAV_LAND (descend at MPC_LAND_SPEED, auto-disarm COM_DISARM_LAND after touch-down), DO_SET_MODE (offboard
   only after >= 1 s of set-points at > 2 Hz, as PX4 >= 1.14), REQUEST_MESSAGE, SET_MESSAGE_INTERVAL; unknown
   commands are answered UNSUPPORTED;
@@ -19,18 +28,23 @@ What it does, the way PX4 v1.16 does it:
   in `DEFAULT_PARAMS`; unknown names are ignored, as PX4 does;
 - SET_POSITION_TARGET_LOCAL_NED in Offboard, honouring the type mask, with simple dynamics: a P position loop
   with velocity feed-forward, speed and acceleration limits, and attitude from the commanded acceleration;
-- failsafes: offboard loss (no set-point for COM_OF_LOSS_T: Hold for COM_FAIL_ACT_T, then COM_OBL_RC_ACT) and
-  GCS link loss (no GCS heartbeat for COM_DL_LOSS_T while armed: NAV_DLL_ACT); the pre-flight auto-disarm
-  (COM_DISARM_PRFLT).
-Every SET_POSITION_TARGET_LOCAL_NED it receives is recorded (`setpoints()`) so tests can check them, and every
-mode change is logged with its time (`mode_log()`).
+- failsafes, as measured on PX4 v1.16 SITL: offboard loss (no set-point for COM_OF_LOSS_T while Offboard is
+  asked for: straight to COM_OBL_RC_ACT, no Hold first; it ends, back to Offboard, as soon as set-points come
+  again) and GCS link loss (no GCS heartbeat for COM_DL_LOSS_T while armed and flying: Hold for
+  COM_FAIL_ACT_T, then NAV_DLL_ACT), each announced by the STATUSTEXT "Failsafe activated"; the pre-flight
+  auto-disarm (COM_DISARM_PRFLT);
+- STATUSTEXT lines PX4 sends on arming, take-off and landing detection and disarming.
+Every SET_POSITION_TARGET_LOCAL_NED it receives is recorded (`setpoints()`) so tests can check them, every
+mode change is logged with its time (`mode_log()`), and so is every STATUSTEXT sent (`texts()`).
 
 What it leaves out: estimator behaviour (position is truth, no drift or noise), wind and real multicopter
 dynamics, terrain (ground is flat at the boot altitude), attitude/rate/acceleration-only offboard set-points,
-SET_POSITION_TARGET_GLOBAL_INT, missions, geofence, battery failsafes, RC input (a pilot is emulated by
-`pilot_takeover`), the events/arming-check protocol, MAVLink signing, FTP and component metadata, statustext
-chatter, message-interval changes (acknowledged but rates stay fixed), COM_RC_OVERRIDE, and PX4's azimuthal
-projection (local <-> global uses the ellipsoid tangent plane, which differs by < 1 cm within 300 m).
+SET_POSITION_TARGET_GLOBAL_INT, missions, geofence, battery failsafes (COM_LOW_BAT_ACT is stored, the battery
+never runs low), RC input (a pilot is emulated by `pilot_takeover`), arming checks other than the two above,
+PX4's events protocol (the detailed reasons behind its STATUSTEXT lines; MAVSDK's events plugin hears nothing
+from the peer), MAVLink signing, FTP and component metadata, most statustext chatter, message-interval
+changes (acknowledged but rates stay fixed), COM_RC_OVERRIDE, and PX4's azimuthal projection (local <->
+global uses the ellipsoid tangent plane, which differs by < 1 cm within 300 m).
 """
 
 from __future__ import annotations
@@ -82,6 +96,9 @@ class PeerMode(Enum):
 
 
 PILOT_MODES = (PeerMode.MANUAL, PeerMode.ALTCTL, PeerMode.POSCTL, PeerMode.STABILIZED)
+# Modes PX4 does not return to after a disarm (they prevent arming).
+NO_ARMING_MODES = (PeerMode.LAND, PeerMode.RTL)
+ARMING_DENIED = "Arming denied: Resolve system health failures first"
 
 # name -> (PX4 default, MAVLink type). Floats are REAL32, ints INT32 (sent byte-wise, as PX4 does).
 DEFAULT_PARAMS: dict[str, tuple[float, int]] = {
@@ -92,6 +109,8 @@ DEFAULT_PARAMS: dict[str, tuple[float, int]] = {
     "NAV_DLL_ACT": (0, mavlink.MAV_PARAM_TYPE_INT32),
     "COM_DISARM_LAND": (2.0, mavlink.MAV_PARAM_TYPE_REAL32),
     "COM_DISARM_PRFLT": (10.0, mavlink.MAV_PARAM_TYPE_REAL32),
+    "COM_ARMABLE": (1, mavlink.MAV_PARAM_TYPE_INT32),
+    "COM_LOW_BAT_ACT": (0, mavlink.MAV_PARAM_TYPE_INT32),
     "MIS_TAKEOFF_ALT": (2.5, mavlink.MAV_PARAM_TYPE_REAL32),
     "MPC_TKO_SPEED": (1.5, mavlink.MAV_PARAM_TYPE_REAL32),
     "MPC_LAND_SPEED": (0.7, mavlink.MAV_PARAM_TYPE_REAL32),
@@ -134,6 +153,16 @@ IGNORE_VELOCITY = 0b111 << 3
 IGNORE_ACCELERATION = 0b111 << 6
 IGNORE_YAW = 1 << 10
 IGNORE_YAW_RATE = 1 << 11
+
+
+@dataclass
+class _Failsafe:
+    """A failsafe PX4 runs on top of the mode asked for: its cause ("offboard": set-points lost; "gcs": the
+    ground station's heartbeat lost), the mode it flies, and when that mode starts (before: Hold)."""
+
+    cause: str
+    action: PeerMode
+    act_at_t: float
 
 
 @dataclass(frozen=True)
@@ -246,7 +275,11 @@ class Px4Peer:
         self._yaw = float(start_yaw_ned_rad)
         self._yaw_rate = 0.0
         self._armed = False
-        self._mode = PeerMode.HOLD
+        self._mode = PeerMode.HOLD  # what the heartbeat shows: the failsafe's mode, else the one asked for
+        self._intended = PeerMode.HOLD  # the mode asked for (PX4's user intention)
+        self._after_disarm = PeerMode.HOLD  # the last mode asked for that allows arming
+        self._failsafe: _Failsafe | None = None
+        self._texts: list[tuple[float, int, str]] = []
         self._landed = True
         self._home_ned = start.copy()
         self._battery = 1.0
@@ -261,8 +294,6 @@ class Px4Peer:
         self._touchdown_t: float | None = None
         self._flew_since_arming = False
         self._armed_t = 0.0
-        self._failsafe_action: PeerMode | None = None
-        self._failsafe_at_t = 0.0
         self._commands: list[tuple[float, int, float, float, float]] = []
 
     # ------------------------------------------------------------------ lifecycle
@@ -293,7 +324,23 @@ class Px4Peer:
     def pilot_takeover(self, mode: PeerMode = PeerMode.POSCTL) -> None:
         """A pilot flips the RC mode switch: the vehicle leaves whatever mode it was in for `mode`."""
         with self._lock:
-            self._set_mode(mode, self._now())
+            self._request_mode(mode, self._now())
+
+    def set_param(self, name: str, value: float) -> None:
+        """Change a parameter on the vehicle itself (e.g. COM_ARMABLE from a maintenance laptop)."""
+        with self._lock:
+            self._params[name][0] = value
+
+    def place_airborne(self, height_m: float, mode: PeerMode = PeerMode.HOLD) -> None:
+        """Put the vehicle in the air, armed, height_m above its ground, in `mode`: as an earlier ground
+        station would have left it."""
+        with self._lock:
+            now = self._now()
+            self._armed, self._armed_t, self._flew_since_arming = True, now, True
+            self._landed, self._touchdown_t = False, None
+            self._p[2] = self._ground_down_m - float(height_m)
+            self._v[:] = 0.0
+            self._request_mode(mode, now)
 
     # ------------------------------------------------------------------ observations (thread-safe copies)
     def now(self) -> float:
@@ -338,6 +385,17 @@ class Px4Peer:
     def setpoints(self) -> list[SeenSetpoint]:
         with self._lock:
             return list(self._setpoints)
+
+    @property
+    def failsafe(self) -> bool:
+        """PX4 runs a failsafe now (its heartbeat's system status is CRITICAL)."""
+        with self._lock:
+            return self._failsafe is not None and self._armed
+
+    def texts(self) -> list[tuple[float, int, str]]:
+        """[(t_s, MAV_SEVERITY, text)] of every STATUSTEXT sent, t_s on the peer clock."""
+        with self._lock:
+            return list(self._texts)
 
     def mode_log(self) -> list[tuple[float, str]]:
         """[(t_s, mode name)] for every mode change, t_s on the peer clock (`now()`)."""
@@ -461,27 +519,29 @@ class Px4Peer:
         accepted, denied = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
         if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if msg.param1 >= 0.5:
-                ok = self._landed
-                if ok and not self._armed:
+                if self._armed:
+                    self._ack(msg, cmd, accepted)
+                elif not self._landed or not self._can_arm(now):
+                    self._ack(msg, cmd, denied)
+                    self._text(mavlink.MAV_SEVERITY_CRITICAL, ARMING_DENIED)
+                else:
                     self._armed, self._armed_t, self._flew_since_arming = True, now, False
                     self._home_ned = self._p.copy()  # home resets at every arming
-                self._ack(msg, cmd, accepted if ok else denied)
+                    self._ack(msg, cmd, accepted)
+                    self._text(mavlink.MAV_SEVERITY_INFO, "Armed by external command")
             else:
                 ok = self._landed or int(msg.param2) == 21196
-                if ok:
-                    self._armed = False
+                if ok and self._armed:
+                    self._disarm(now, "Disarmed by external command")
                 self._ack(msg, cmd, accepted if ok else denied)
         elif cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
-            if not self._armed:
-                self._ack(msg, cmd, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
-            else:
-                self._set_mode(PeerMode.TAKEOFF, now)
-                self._ack(msg, cmd, accepted)
+            self._request_mode(PeerMode.TAKEOFF, now)  # disarmed too: it climbs once armed
+            self._ack(msg, cmd, accepted)
         elif cmd == mavlink.MAV_CMD_NAV_LAND:
-            self._set_mode(PeerMode.LAND, now)
+            self._request_mode(PeerMode.LAND, now)
             self._ack(msg, cmd, accepted)
         elif cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            self._set_mode(PeerMode.RTL, now)
+            self._request_mode(PeerMode.RTL, now)
             self._ack(msg, cmd, accepted)
         elif cmd == mavlink.MAV_CMD_DO_SET_MODE:
             mode = PeerMode.from_main_sub(int(msg.param2), int(msg.param3))
@@ -490,7 +550,7 @@ class Px4Peer:
             elif mode is PeerMode.OFFBOARD and not self._offboard_signal_ok(now):
                 self._ack(msg, cmd, denied)
             else:
-                self._set_mode(mode, now)
+                self._request_mode(mode, now)
                 self._ack(msg, cmd, accepted)
         elif cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
             self._ack(
@@ -509,6 +569,27 @@ class Px4Peer:
     def _offboard_signal_ok(self, now: float) -> bool:
         return now - self._last_sp_t < 0.5 and now - self._sp_stream_start >= 1.0
 
+    def _offboard_signal_lost(self, now: float) -> bool:
+        return now - self._last_sp_t > self._params["COM_OF_LOSS_T"][0]
+
+    def _can_arm(self, now: float) -> bool:
+        """PX4's arming checks as modelled: COM_ARMABLE, and an offboard signal when Offboard is asked for."""
+        if int(self._params["COM_ARMABLE"][0]) < 1:
+            return False
+        return not (self._intended is PeerMode.OFFBOARD and self._offboard_signal_lost(now))
+
+    def _text(self, severity: int, text: str) -> None:
+        """A STATUSTEXT line as PX4 sends it (with the tab PX4 ends evented lines with)."""
+        self._texts.append((self._now(), severity, text))
+        self._mav.statustext_send(severity, (text + "\t").encode()[:50])
+
+    def _disarm(self, now: float, why: str) -> None:
+        self._armed = False
+        self._failsafe = None
+        self._intended = self._after_disarm  # PX4 returns to the last mode asked for that allows arming
+        self._show_mode(now)
+        self._text(mavlink.MAV_SEVERITY_INFO, why)
+
     def _send_requested(self, message_id: int) -> bool:
         if message_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
             self._send_home()
@@ -526,12 +607,23 @@ class Px4Peer:
             return False
         return True
 
-    def _set_mode(self, mode: PeerMode, now: float) -> None:
+    def _request_mode(self, mode: PeerMode, now: float) -> None:
+        """A mode asked for (ground station, pilot, or PX4's own step such as take-off done): it becomes the
+        user's intention, ends any failsafe, and is where a disarm returns to unless it prevents arming."""
+        self._intended = mode
+        if mode not in NO_ARMING_MODES:
+            self._after_disarm = mode
+        self._failsafe = None
+        self._show_mode(now)
+
+    def _show_mode(self, now: float) -> None:
+        """The mode the heartbeat shows: the failsafe's (Hold during its delay), else the one asked for."""
+        fs = self._failsafe
+        mode = self._intended if fs is None else (fs.action if now >= fs.act_at_t else PeerMode.HOLD)
         if mode is self._mode:
             return
         self._mode = mode
         self._mode_log.append((now, mode.name))
-        self._failsafe_action = None
         if mode in (PeerMode.HOLD, *PILOT_MODES):
             self._hold_point = self._p.copy()
             if self._landed:
@@ -591,7 +683,7 @@ class Px4Peer:
             speed = float(self._params["MPC_TKO_SPEED"][0])
             vz = -speed if self._p[2] - target[2] > 0.5 else None
             if abs(self._p[2] - target[2]) < 0.2:
-                self._set_mode(PeerMode.HOLD, now)
+                self._request_mode(PeerMode.HOLD, now)  # PX4's navigator: take-off done, loiter
             return target, zero, None, vz
         if self._mode is PeerMode.LAND:
             target = np.array([self._land_xy[0], self._land_xy[1], self._p[2]])
@@ -600,7 +692,11 @@ class Px4Peer:
             cruise_down = min(self._p[2], self._ground_down_m - 5.0)
             target = np.array([self._home_ned[0], self._home_ned[1], cruise_down])
             if np.linalg.norm(self._p[:2] - self._home_ned[:2]) < 1.0:
-                self._set_mode(PeerMode.LAND, now)
+                if self._failsafe is not None:
+                    self._failsafe.action = PeerMode.LAND
+                    self._show_mode(now)
+                else:
+                    self._request_mode(PeerMode.LAND, now)
             return target, zero, None, None
         return self._hold_point.copy(), zero, None, None  # Hold and the pilot modes (sticks centred)
 
@@ -610,7 +706,10 @@ class Px4Peer:
             self._v[:] = 0.0
             if not self._landed and self._mode is not PeerMode.TAKEOFF:
                 self._landed, self._touchdown_t = True, now
+                self._text(mavlink.MAV_SEVERITY_INFO, "Landing detected")
         elif self._p[2] < self._ground_down_m - 0.1:
+            if self._landed:
+                self._text(mavlink.MAV_SEVERITY_INFO, "Takeoff detected")
             self._landed, self._touchdown_t, self._flew_since_arming = False, None, True
         if (
             self._landed
@@ -618,7 +717,7 @@ class Px4Peer:
             and self._touchdown_t is not None
             and now - self._touchdown_t > self._params["COM_DISARM_LAND"][0]
         ):
-            self._armed = False  # landing detected: auto-disarm
+            self._disarm(now, "Disarmed by landing")
 
     def _failsafes(self, now: float) -> None:
         if (
@@ -627,29 +726,31 @@ class Px4Peer:
             and self._mode is not PeerMode.TAKEOFF
             and now - self._armed_t > self._params["COM_DISARM_PRFLT"][0]
         ):
-            self._armed = False  # armed but never took off
-        if self._mode is PeerMode.OFFBOARD and now - self._last_sp_t > self._params["COM_OF_LOSS_T"][0]:
-            action = OFFBOARD_LOSS_ACTIONS.get(int(self._params["COM_OBL_RC_ACT"][0]), PeerMode.LAND)
-            self._set_mode(PeerMode.HOLD, now)  # PX4 holds COM_FAIL_ACT_T before the failsafe action
-            self._failsafe_action, self._failsafe_at_t = action, now + self._params["COM_FAIL_ACT_T"][0]
-        dll = int(self._params["NAV_DLL_ACT"][0])
-        if (
-            self._armed
-            and not self._landed
-            and dll in LINK_LOSS_ACTIONS
-            and self._failsafe_action is None
-            and self._mode is not LINK_LOSS_ACTIONS[dll]
-            and self._mode is not PeerMode.LAND
-            and now - self._last_gcs_heartbeat_t > self._params["COM_DL_LOSS_T"][0]
-        ):
-            self._set_mode(PeerMode.HOLD, now)
-            self._failsafe_action, self._failsafe_at_t = (
-                LINK_LOSS_ACTIONS[dll],
-                now + self._params["COM_FAIL_ACT_T"][0],
-            )
-        if self._failsafe_action is not None and now >= self._failsafe_at_t:
-            action, self._failsafe_action = self._failsafe_action, None
-            self._set_mode(action, now)
+            self._disarm(now, "Disarmed by auto preflight disarming")  # armed but never took off
+        fs = self._failsafe
+        gcs_lost = now - self._last_gcs_heartbeat_t > self._params["COM_DL_LOSS_T"][0]
+        if fs is not None and fs.cause == "offboard" and not self._offboard_signal_lost(now):
+            self._failsafe = None  # a mode fallback: it ends, back to Offboard, once set-points come again
+        elif fs is not None and fs.cause == "gcs" and fs.action is PeerMode.HOLD and not gcs_lost:
+            self._failsafe = None
+        elif fs is None and self._armed:
+            dll = int(self._params["NAV_DLL_ACT"][0])
+            if self._intended is PeerMode.OFFBOARD and self._offboard_signal_lost(now):
+                action = OFFBOARD_LOSS_ACTIONS.get(int(self._params["COM_OBL_RC_ACT"][0]), PeerMode.LAND)
+                self._failsafe = _Failsafe(cause="offboard", action=action, act_at_t=now)  # no Hold first
+                self._text(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe activated")
+            elif (
+                not self._landed
+                and dll in LINK_LOSS_ACTIONS
+                and self._intended is not PeerMode.LAND
+                and gcs_lost
+            ):
+                delay = float(self._params["COM_FAIL_ACT_T"][0])
+                self._failsafe = _Failsafe(cause="gcs", action=LINK_LOSS_ACTIONS[dll], act_at_t=now + delay)
+                self._text(
+                    mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe activated: entering Hold for {delay:g} seconds"
+                )
+        self._show_mode(now)
 
     # ------------------------------------------------------------------ telemetry (lock held)
     def _geodetic_now(self) -> tuple[float, float, float]:
@@ -660,7 +761,10 @@ class Px4Peer:
         base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if self._armed:
             base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-        status = mavlink.MAV_STATE_ACTIVE if self._armed else mavlink.MAV_STATE_STANDBY
+            status = mavlink.MAV_STATE_CRITICAL if self._failsafe is not None else mavlink.MAV_STATE_ACTIVE
+        else:
+            can_arm = self._can_arm(self._now())
+            status = mavlink.MAV_STATE_STANDBY if can_arm else mavlink.MAV_STATE_UNINIT
         self._mav.heartbeat_send(
             mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base, self._mode.custom_mode, status
         )
@@ -705,10 +809,13 @@ class Px4Peer:
         else:
             landed = mavlink.MAV_LANDED_STATE_IN_AIR
         self._mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
+        healthy = _SENSORS
+        if not self._armed and not self._can_arm(self._now()):
+            healthy &= ~mavlink.MAV_SYS_STATUS_PREARM_CHECK  # PX4 clears its pre-arm bit: it cannot arm
         self._mav.sys_status_send(
             _SENSORS,
             _SENSORS,
-            _SENSORS,
+            healthy,
             200,
             int(12600 + 4200 * self._battery),
             1000,

@@ -39,9 +39,15 @@ class AutopilotState:
     link_lost: no telemetry for longer than the back-end's limit (PX4: 1 s); the other fields are the last
     known values and stamp_s says how old they are. released: a pilot or the autopilot's own failsafe took the
     vehicle out of offboard; skyring does not fight for control and ignores set-points until re-engaged
-    (takeoff). failsafe: the autopilot's own failsafe action in progress, in words ("" when none: e.g.
-    "battery 14 % at or below 15 %: landing"); arming_refused: why it refused the last request to arm ("" when
-    it did not, or once it armed).
+    (takeoff).
+
+    What the autopilot itself says, beyond skyring's reading of it (empty or None when a back-end cannot
+    tell): autopilot_mode: the autopilot's own mode name (PX4: "OFFBOARD", "LAND", "HOLD",
+    "RETURN_TO_LAUNCH", ...), shown even where `mode` reads READY on the ground; failsafe: the autopilot runs
+    one of its own failsafes now (PX4: a critical system status while armed), or the vehicle lands because of
+    one the autopilot has already left, and failsafe_reason its words for it; can_arm: its pre-arm checks
+    pass in its current mode (None: unknown); arming_refusal: its words for why the last arming or takeoff
+    skyring asked for was refused (None once one succeeds).
     """
 
     vehicle_id: int
@@ -59,8 +65,11 @@ class AutopilotState:
     position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
     link_lost: bool = False
     released: bool = False
-    failsafe: str = ""
-    arming_refused: str = ""
+    autopilot_mode: str = ""
+    failsafe: bool = False
+    failsafe_reason: str | None = None
+    can_arm: bool | None = None
+    arming_refusal: str | None = None
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))

@@ -7,9 +7,12 @@ It holds the operator's formation parameters, static and virtual obstacles, and 
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
-    TAKEOFF, FORMATION --hold()--> HOLDING --release()--> FORMATION (`vehicles.pilot` has the whole machine)
+    TAKEOFF, FORMATION --hold()--> HOLDING --release()--> FORMATION
+    IDLE, airborne --(the operator starts the formation or releases it)--> FORMATION
+    TAKEOFF / FORMATION / HOLDING --(the autopilot lands or returns it by itself)--> LANDING
 
-A MAV that is holding, landing or landed has left formation control: it publishes plans marked
+(`vehicles.pilot` has the whole machine.) The roster holds only the vehicles airborne, heard and flown by
+skyring. A MAV that is holding, landing or landed has left formation control: it publishes plans marked
 not-in-formation (then none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by
 themselves. Operator actions are methods that take effect at the next `step` (within one control period); a
 refused action raises `MissionError` with a message a person can act on and changes nothing.
@@ -30,8 +33,6 @@ from vehicles.autopilot import Autopilot
 from vehicles.link_loss import silent_vehicle_obstacle
 from vehicles.links import Links
 from vehicles.pilot import (
-    AIRBORNE_PHASES,
-    FLYING_PHASES,
     AgentLink,
     MissionError,
     MissionParams,
@@ -211,9 +212,9 @@ class Mission:
             raise
 
     def land_all(self) -> None:
-        """Land every vehicle that is taking off, flying or holding."""
+        """Land every vehicle that is taking off, flying, holding, or found flying (adopted)."""
         for v in self._vehicles.values():
-            if v.phase in AIRBORNE_PHASES:
+            if v.airborne:
                 v.start_landing(self._now)
 
     def hold(self, vehicle_id: int) -> None:
@@ -228,7 +229,8 @@ class Mission:
 
     def release(self, vehicle_id: int) -> None:
         """Give a vehicle back to the formation: a landed one takes off again (when formation is enabled), a
-        holding one rejoins from where it hovers."""
+        holding one rejoins from where it hovers, and an airborne one skyring does not fly joins
+        (`VehiclePilot.release`)."""
         v = self._vehicle(vehicle_id)
         try:
             v.release()
@@ -237,8 +239,13 @@ class Mission:
             raise
 
     def set_formation_enabled(self, enabled: bool) -> None:
-        """Start (True) or stop (False) formation control; stopped MAVs hold position, idle ones stay down."""
+        """Start (True) or stop (False) formation control; stopped MAVs hold position, idle ones stay down.
+        Starting it also brings in the airborne vehicles found flying (adopted) once their autopilot lets
+        them."""
         self._enabled = bool(enabled)
+        if self._enabled:
+            for v in self._vehicles.values():
+                v.formation_started()
 
     # ---- the control tick ---------------------------------------------------------------------------------
     def step(self, now_s: float) -> None:
@@ -293,7 +300,7 @@ class Mission:
             virtual_obstacle_ids=tuple(self._virtual),
             formation=self._formation,
             formation_enabled=self._enabled,
-            slot_count=sum(v.phase in FLYING_PHASES for v in self._vehicles.values()),
+            slot_count=sum(v.in_roster for v in self._vehicles.values()),
             counters=team_counters(vehicles, rejected_actions=self._rejected_actions),
         )
 

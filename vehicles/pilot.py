@@ -2,11 +2,22 @@
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
-    TAKEOFF, FORMATION --hold()--> HOLDING --release()--> FORMATION;  HOLDING --land()--> LANDING
-    TAKEOFF, FORMATION, HOLDING --(the autopilot lands by itself: a failsafe or a pilot)--> LANDING
+    TAKEOFF, FORMATION (in the air) --hold()--> HOLDING --release()--> FORMATION
+    IDLE, airborne --(the operator starts the formation or releases it)--> FORMATION
+    IDLE airborne, TAKEOFF, FORMATION, HOLDING --land(), land_all--> LANDING
+    TAKEOFF / FORMATION / HOLDING --(the autopilot lands or returns it by itself)--> LANDING
 
 A holding MAV hovers where the operator stopped it, out of formation control: its teammates avoid it and
-re-space without it.
+re-space without it; released, it rejoins from where it hovers. While the autopilot runs one of its own
+failsafes, release is refused in every phase: the autopilot's decision stands until it ends or the vehicle is
+down.
+
+The formation roster (the slots teammates space for) holds only vehicles that are airborne, heard, and flown
+by skyring: one on the ground (e.g. its autopilot refused to arm), one a pilot took, or one the autopilot
+flies in its own failsafe (Land, Hold, Return) is left out, and one the autopilot lands by itself is landing
+(its failsafe's landing stands: once down it waits for release). A vehicle found airborne when the mission
+starts (an earlier ground station flew it) is adopted as it is: avoided, not steered, until the operator
+starts the formation or releases it.
 
 The in-process `Mission` holds one `VehiclePilot` per vehicle and feeds them the team's roster; the onboard
 agent process (`vehicles.net.onboard`) holds exactly one and builds the roster from what it hears over the
@@ -52,12 +63,15 @@ class MissionParams:
     """takeoff_height_m: None = the formation height (h_des above a person standing on the ground) clamped
     0.5 m inside the MPC's height bounds; at_height_tolerance_m: takeoff is done within this of the target;
     retry_s: a takeoff or land command that shows no effect is re-sent after this long (lost commands over a
-    real link); slot_offset_rad: bearing of roster slot 0 about the person (slot k at offset + 2 pi k / K)."""
+    real link); slot_offset_rad: bearing of roster slot 0 about the person (slot k at offset + 2 pi k / K);
+    mode_grace_s: how long an autopilot's mode reading may lag a command (PX4 reports its mode once a second):
+    a Land read sooner after a take-off command is the old mode, not the autopilot landing the vehicle."""
 
     takeoff_height_m: float | None = None
     at_height_tolerance_m: float = 0.5
     retry_s: float = 1.0
     slot_offset_rad: float = 0.0
+    mode_grace_s: float = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,7 +83,9 @@ class VehicleSnapshot:
     last result; tick_s: wall time of the last agent tick (None without a clock); link_age_s: age of the
     telemetry; teammates_known: teammates whose plans are fresh; used_slot: steering to the roster slot
     because teammates are unheard; fault: last fault line; agent: how the ground station hears this
-    vehicle's agent over the network (None when the agent runs in the station's own process).
+    vehicle's agent over the network (None when the agent runs in the station's own process); in_formation: in
+    the formation roster and flown by formation control now (False while its autopilot runs a failsafe, a
+    pilot has it, its link is lost, or it is not airborne).
     """
 
     vehicle_id: int
@@ -88,6 +104,7 @@ class VehicleSnapshot:
     tracker: TrackerStats
     counters: AgentCounters
     agent: AgentLink | None = None
+    in_formation: bool = False
 
 
 @dataclass(frozen=True)
@@ -137,6 +154,10 @@ class VehiclePilot:
         self.tick_s: float | None = None
         self.paused = False
         self.state: AutopilotState | None = None
+        self.resume = False  # airborne and not flown by skyring: the operator asked for it to join
+        self.rejoin = False  # a pilot gave it back in the air: re-engage it at the next observation
+        self.held_since_s: float | None = None  # taking off: when the autopilot was first seen holding
+        self._enabled = False
         self._clock = clock
         self._now = 0.0
 
@@ -152,17 +173,48 @@ class VehiclePilot:
     @property
     def released(self) -> bool:
         """A pilot or the autopilot's failsafe has it: teammates avoid it, nobody steers it."""
-        return self.state is not None and self.state.released
+        s = self.state
+        return s is not None and (s.released or s.failsafe)
+
+    @property
+    def leaving(self) -> bool:
+        """The autopilot is taking the vehicle down or home (Land, Return), whoever asked."""
+        s = self.state
+        return s is not None and s.in_air and s.mode in (FlightMode.LAND, FlightMode.RETURN)
+
+    @property
+    def _ours(self) -> bool:
+        """skyring may command it: no pilot or autopilot failsafe has it, and the autopilot is not taking it
+        down or home."""
+        return not (self.released or self.leaving)
+
+    @property
+    def adopted(self) -> bool:
+        """Found flying and not (yet) flown by skyring: idle in the air."""
+        return self.phase == Phase.IDLE and self.state is not None and self.state.in_air
+
+    @property
+    def airborne(self) -> bool:
+        """What LAND ALL lands: taking off, flying formation, holding, or found flying."""
+        return self.phase in AIRBORNE_PHASES or self.adopted
 
     @property
     def in_roster(self) -> bool:
-        """Counts in the formation: taking off or flying it, heard, and not taken by a pilot."""
-        return self.phase in FLYING_PHASES and not self.silent and not self.released
+        """Counts in the formation: taking off or flying it, airborne, heard, and flown by skyring (not
+        taken by a pilot or the autopilot's failsafe, not landing)."""
+        airborne = self.state is not None and self.state.in_air
+        return (
+            self.phase in FLYING_PHASES
+            and airborne
+            and not self.silent
+            and not self.released
+            and not self.leaving
+        )
 
     # ---- operator actions ---------------------------------------------------------------------------------
     def land(self, now_s: float) -> None:
-        """Land now; MissionError when already on the ground."""
-        if self.phase in (Phase.IDLE, Phase.LANDED):
+        """Land now (also a vehicle found flying); MissionError when already on the ground."""
+        if self.phase == Phase.LANDED or (self.phase == Phase.IDLE and not self.adopted):
             raise MissionError(f"vehicle {self.vehicle_id} is on the ground already ({self.phase.value})")
         self.start_landing(now_s)
 
@@ -188,41 +240,83 @@ class VehiclePilot:
         self.autopilot.hold()
 
     def release(self) -> None:
-        """Give a vehicle back to the formation: a landed one takes off again (when formation is enabled), a
-        holding one rejoins from where it hovers; MissionError otherwise."""
-        if self.phase == Phase.HOLDING:
-            self.phase = Phase.FORMATION
-            return
-        if self.phase != Phase.LANDED:
+        """Give the vehicle back to the formation: a landed one takes off again (when formation is enabled);
+        a holding one rejoins from where it hovers; an airborne one skyring does not fly (found flying, or a
+        pilot gave it back) joins it. MissionError otherwise, and while the autopilot runs a failsafe (in any
+        phase): its decision stands until it ends or it is down.
+        """
+        s = self.state
+        if s is not None and s.failsafe:
+            why = f": {s.failsafe_reason}" if s.failsafe_reason else ""
             raise MissionError(
-                f"vehicle {self.vehicle_id} is {self.phase.value}; only a landed or holding vehicle can be "
-                "released"
+                f"vehicle {self.vehicle_id} is in its autopilot's failsafe "
+                f"({s.autopilot_mode or s.mode.value}{why}); it can rejoin once the failsafe ends or it has "
+                "landed"
             )
-        self.phase = Phase.IDLE
+        if self.phase == Phase.LANDED:
+            self.phase = Phase.IDLE
+            return
+        if self.phase == Phase.HOLDING:
+            self.phase = Phase.FORMATION  # its set-points end the hold
+            # A pilot took it while it held: re-engage it, as a vehicle a pilot gave back in formation.
+            self.rejoin = s is not None and s.in_air and s.released
+            return
+        airborne_idle = self.phase == Phase.IDLE and s is not None and s.in_air
+        taken = self.phase in FLYING_PHASES and s is not None and s.in_air and s.released
+        if not (airborne_idle or taken):
+            raise MissionError(
+                f"vehicle {self.vehicle_id} is {self.phase.value}; only a landed or holding vehicle, or an "
+                "airborne one skyring does not fly, can be released"
+            )
+        self.resume = True
+        self.rejoin = taken
+
+    def formation_started(self) -> None:
+        """The operator started the formation: a vehicle found flying may join it (once its autopilot lets
+        it)."""
+        if self.phase == Phase.IDLE and self.state is not None and self.state.in_air:
+            self.resume = True
 
     # ---- the control tick ---------------------------------------------------------------------------------
     def observe(self, now_s: float, *, enabled: bool, takeoff_height_m: float) -> AutopilotState | None:
         """Read the autopilot and advance the phase machine (take-off, landing and their retries)."""
         self._now = now_s
+        self._enabled = enabled
         self.state = s = self.autopilot.state()
         if s is None:
             return None
         retry = now_s - self.command_s >= self.params.retry_s
-        if self.phase in AIRBORNE_PHASES and s.in_air and s.released and s.mode == FlightMode.LAND:
-            self.phase = Phase.LANDING  # the autopilot's failsafe (or a pilot) is landing it
+        settled = now_s - self.command_s >= self.params.mode_grace_s
+        if self.phase in AIRBORNE_PHASES and self.leaving and settled:
+            self.phase = Phase.LANDING  # its autopilot lands (or returns) it: that landing stands
             self.command_s = now_s
-        elif self.phase == Phase.IDLE and enabled and not s.in_air:
+        elif self.rejoin and self.phase in FLYING_PHASES and s.in_air and not s.failsafe:
+            self.rejoin = False
+            self.command_s = now_s
+            self.autopilot.takeoff(takeoff_height_m)  # re-engages an airborne vehicle
+        elif self.phase == Phase.IDLE and s.in_air:
+            # Found flying (adopted): avoided, not steered, until the operator asks for it and PX4 lets go.
+            if self.resume and enabled and not s.link_lost and not s.failsafe and not self.leaving:
+                self.phase = Phase.FORMATION
+                self.paused = False
+                self.command_s = now_s
+                self.autopilot.takeoff(takeoff_height_m)  # re-engages an airborne vehicle
+        elif self.phase == Phase.IDLE and enabled:
+            self.resume = False
             self.phase = Phase.TAKEOFF
             self.command_s = now_s
             self.autopilot.takeoff(takeoff_height_m)
         elif self.phase == Phase.TAKEOFF:
-            if (
-                s.in_air
-                and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
-                and (abs(s.position_m[2] - takeoff_height_m) <= self.params.at_height_tolerance_m)
-            ):
+            held = s.in_air and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
+            held_since = (self.held_since_s if self.held_since_s is not None else now_s) if held else None
+            self.held_since_s = held_since
+            at_height = abs(s.position_m[2] - takeoff_height_m) <= self.params.at_height_tolerance_m
+            # A take-off that ends away from the formation height (the autopilot climbed to another one) joins
+            # all the same once the autopilot has held for mode_grace_s: the controller brings it to height.
+            if held_since is not None and (at_height or now_s - held_since >= self.params.mode_grace_s):
                 self.phase = Phase.FORMATION
                 self.paused = False
+                self.held_since_s = None
             elif retry and s.mode != FlightMode.TAKEOFF and not s.in_air:
                 self.command_s = now_s
                 self.autopilot.takeoff(takeoff_height_m)
@@ -237,23 +331,24 @@ class VehiclePilot:
         elif self.phase == Phase.HOLDING:
             if not s.in_air and not s.armed:
                 self.phase = Phase.LANDED
-            elif retry and s.mode not in (FlightMode.HOLD, FlightMode.MANUAL) and not s.released:
+            elif retry and s.mode not in (FlightMode.HOLD, FlightMode.MANUAL) and self._ours:
                 self.command_s = now_s
-                self.autopilot.hold()
+                self.autopilot.hold()  # a lost hold command (not one a pilot or the autopilot overrode)
         elif self.phase == Phase.LANDING:
             if not s.in_air:
                 self.phase = Phase.LANDED
-            elif retry and s.mode != FlightMode.LAND:
+            elif retry and s.mode not in (FlightMode.LAND, FlightMode.RETURN, FlightMode.MANUAL):
                 self.command_s = now_s
-                self.autopilot.land()
+                self.autopilot.land()  # e.g. PX4 ended its failsafe landing by itself: it still lands
         return s
 
     def role(self, *, enabled: bool) -> AgentRole:
-        """What the agent should do this tick, from the phase and the formation switch."""
-        if self.phase == Phase.FORMATION and enabled and not self.released:
+        """What the agent should do this tick, from the phase and the formation switch. A vehicle a pilot or
+        the autopilot's failsafe has, or that is being landed, is avoided but not steered; so is one found
+        flying (airborne, idle)."""
+        if self.phase == Phase.FORMATION and enabled and not self.released and not self.leaving:
             return AgentRole.FORMATION
-        airborne = self.state is not None and self.state.in_air
-        if airborne and self.phase in (*AIRBORNE_PHASES, Phase.LANDING):
+        if self.state is not None and self.state.in_air and self.phase != Phase.LANDED:
             return AgentRole.AIRBORNE
         return AgentRole.GROUND
 
@@ -290,6 +385,7 @@ class VehiclePilot:
             fault=out.fault if out is not None else None,
             tracker=out.tracker if out is not None else TrackerStats(),
             counters=out.counters if out is not None else AgentCounters(),
+            in_formation=self.in_roster and self.role(enabled=self._enabled) == AgentRole.FORMATION,
         )
 
 

@@ -34,6 +34,10 @@ STATUS_WARNING = Status("warning", SEVERITY_COLORS[Severity.WARNING])
 STATUS_CRITICAL = Status("critical", SEVERITY_COLORS[Severity.CRITICAL])
 AGENT_LOST_FLAG = "AGENT LOST"
 SKEW_FLAG = "CLOCK SKEW"
+STALE_FLAG = "STALE"
+FAILSAFE_FLAG = "FAILSAFE"  # the autopilot runs its own failsafe (PX4: Land, Hold, Return)
+REFUSED_FLAG = "ARMING REFUSED"  # the autopilot refused the take-off; its reason follows
+HELD_FLAG = "CANNOT TAKE OFF HERE"  # the pre-take-off checks (person keep-out, d_min) refuse it
 
 
 def vehicle_status(vehicle: VehicleView, alerts: Iterable[Alert]) -> Status:
@@ -129,13 +133,13 @@ TEAM_COLUMNS = ("", "MAV", "phase", "mode", "alt m", "v m/s", "d m", "link s", "
 
 def team_table_html(view: SceneView, colors: dict[int, tuple[int, int, int]]) -> str:
     """The team at a glance, one compact row per MAV (fits 16): status colour, its own colour and number,
-    phase, autopilot mode, altitude, speed, horizontal distance to the person, link age (STALE when stale),
-    battery, solver time (or its status when it did not solve)."""
+    phase, the autopilot's own mode, altitude, speed, horizontal distance to the person, link age (STALE
+    when stale), battery, solver time (or its status when it did not solve)."""
     head = "".join(f'<th style="text-align:left;padding:1px 3px">{html.escape(c)}</th>' for c in TEAM_COLUMNS)
     rows = []
     for v in view.vehicles:
         status = vehicle_status(v, view.alerts)
-        link = "STALE" if v.link_stale else _num(v.link_age_s, ".1f")
+        link = STALE_FLAG if v.link_stale else _num(v.link_age_s, ".1f")
         link_style = ' style="color:#e03131;font-weight:bold"' if v.link_stale else ""
         battery = _num(v.battery_fraction, ".0f", scale=100.0)
         battery = battery + "%" if battery != "-" else battery
@@ -146,7 +150,7 @@ def team_table_html(view: SceneView, colors: dict[int, tuple[int, int, int]]) ->
             _dot(status.color, status.name),
             _swatch(colors.get(v.vehicle_id, (0, 0, 0))) + f"<b>{v.vehicle_id}</b>",
             html.escape(v.phase),
-            html.escape(v.mode),
+            html.escape(v.autopilot_mode or v.mode),
             _num(v.altitude_m, ".1f"),
             _num(v.speed_mps, ".1f"),
             _num(v.distance_to_person_m, ".1f"),
@@ -180,26 +184,31 @@ def agent_line(vehicle: VehicleView) -> str:
 
 
 def vehicle_detail_markdown(vehicle: VehicleView, alerts: Iterable[Alert]) -> str:
-    """Everything about one MAV, for the detail under the team table (with its onboard agent's link, clock
-    and last command when it runs on the vehicle)."""
+    """Everything about one MAV, for the detail under the team table: phase (in formation or not), the
+    autopilot's own mode, pose, battery, link, solver; then, when there is one, the autopilot's failsafe and
+    why, why it refused to arm, why the ground station would not let it take off where it stands, and its
+    onboard agent's link, clock and last command when it runs on the vehicle."""
     v = vehicle
     p, vel = v.position_m, v.velocity_mps
     status = vehicle_status(v, alerts)
+    formation = " · in formation" if v.in_formation else ""
     lines = [
-        f"**MAV {v.vehicle_id}**: {v.phase}, mode {v.mode}, {'armed' if v.armed else 'disarmed'}, "
-        f"{'in air' if v.in_air else 'on ground'} ({status.name})",
+        f"**MAV {v.vehicle_id}**: {v.phase}{formation}, autopilot {v.autopilot_mode or v.mode}, "
+        f"{'armed' if v.armed else 'disarmed'}, {'in air' if v.in_air else 'on ground'} ({status.name})",
         f"position ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f}) m · velocity ({vel[0]:.1f}, {vel[1]:.1f}, "
         f"{vel[2]:.1f}) m/s · yaw {math.degrees(v.yaw_rad):.0f} deg",
         f"distance to person {_num(v.distance_to_person_m, '.1f')} m · battery "
         f"{_num(v.battery_fraction, '.0f', scale=100.0)} % · link age {_num(v.link_age_s, '.1f')} s"
-        + (" **STALE**" if v.link_stale else ""),
+        + (f" **{STALE_FLAG}**" if v.link_stale else ""),
         f"solver {v.solve_status or '-'} {_num(v.solver_time_s, '.2f', scale=1e3)} ms · plan age "
         f"{_num(v.plan_age_s, '.1f')} s",
     ]
     if v.failsafe:
-        lines.append(f"autopilot failsafe: **{v.failsafe}**")
-    if v.arming_refused:
-        lines.append(f"arming refused: {v.arming_refused}")
+        lines.append(f"**{FAILSAFE_FLAG}**: {v.failsafe_reason or 'the autopilot runs its failsafe'}")
+    if v.arming_refusal:
+        lines.append(f"**{REFUSED_FLAG}**: {v.arming_refusal}")
+    if v.takeoff_check:
+        lines.append(f"**{HELD_FLAG}**: {v.takeoff_check}")
     if v.released:
         lines.append("released: the autopilot or a pilot has it, skyring does not steer it")
     if v.fault:

@@ -14,8 +14,9 @@ Two windows:
 Every control calls the same `OperatorActions` the REST API calls; a refusal (ValueError) becomes a
 notification to the client that asked, and the control snaps back to the ground station's value. Whatever
 takes a MAV off the ground (Start formation, Release of a landed MAV) or lands it (Land, LAND ALL) sits behind
-a per-client confirmation modal. viser runs these callbacks on its own threads, so the actions object must be
-thread-safe (the ground station's is).
+a per-client confirmation modal; when the pre-take-off checks (person keep-out, d_min) refuse a start or a
+release, a second modal offers the logged override. viser runs these callbacks on its own threads, so the
+actions object must be thread-safe (the ground station's is).
 """
 
 from __future__ import annotations
@@ -326,22 +327,44 @@ class OperatorPanel:
         self._h_des.value = view.formation.h_des_m
 
     def _on_start_formation(self, event: viser.GuiEvent) -> None:
-        grounded = [v.vehicle_id for v in self._view.vehicles if v.phase == "idle" and not v.in_air]
-        landed = [v.vehicle_id for v in self._view.vehicles if v.phase == "landed"]
-        takes_off = (
+        vehicles = self._view.vehicles
+        grounded = [v.vehicle_id for v in vehicles if v.phase == "idle" and not v.in_air]
+        found = [v.vehicle_id for v in vehicles if v.phase == "idle" and v.in_air]
+        landed = [v.vehicle_id for v in vehicles if v.phase == "landed"]
+        lines = [
             f"MAVs {', '.join(map(str, grounded))} **take off** and fly the formation."
             if grounded
             else "No MAV is waiting on the ground: the flying ones resume the formation."
-        )
-        stay = f"  \nLanded MAVs ({', '.join(map(str, landed))}) stay down until released." if landed else ""
+        ]
+        if found:
+            lines.append(f"MAVs {', '.join(map(str, found))}, found flying, join it from where they are.")
+        if landed:
+            lines.append(f"Landed MAVs ({', '.join(map(str, landed))}) stay down until released.")
+        client = event.client
         self._confirm(
-            event.client,
+            client,
             "Start formation?",
-            takes_off + stay,
+            "  \n".join(lines),
             "Start formation",
-            lambda: self._actions.set_formation_enabled(True),
-            "Formation started",
+            lambda: self._start_formation(client),
+            None,
         )
+
+    def _start_formation(self, client: viser.ClientHandle | None) -> None:
+        """Start the formation; when the pre-take-off checks refuse it, offer the logged override."""
+        if self._run(client, lambda: self._actions.set_formation_enabled(True), "Formation started"):
+            return
+        held = [v for v in self._view.vehicles if v.takeoff_check and v.phase == "idle"]
+        if held:
+            self._confirm(
+                client,
+                "Start anyway?",
+                "  \n".join(f"MAV {v.vehicle_id} {v.takeoff_check}" for v in held)
+                + "  \nStarting anyway takes them off where they stand; the override is logged.",
+                "Start anyway (override)",
+                lambda: self._actions.set_formation_enabled(True, override=True),
+                "Formation started: pre-take-off checks overridden (logged)",
+            )
 
     def _on_add_obstacle(self, event: viser.GuiEvent) -> None:
         if event.client is None:
@@ -400,10 +423,11 @@ class OperatorPanel:
         body: str,
         confirm_label: str,
         action: Callable[[], object],
-        done: str,
+        done: str | None,
     ) -> None:
-        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button. One
-        modal per client and question: asking again while it is open does not stack another."""
+        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button (then
+        notify `done`, unless None: the action tells the outcome itself). One modal per client and question:
+        asking again while it is open does not stack another."""
         if client is None:
             return
         key = (client.client_id, title)

@@ -2,7 +2,8 @@
 
 A MAV is chosen in the drop-down or by clicking its body in the 3-D view. Hold stops it where it is (no
 confirmation: it keeps it in the air where it is); Land and Release ask for confirmation (Release of a landed
-MAV takes it off the ground again).
+MAV takes it off the ground again; a holding one, or an airborne one skyring does not fly, joins from the
+air). A Release the pre-take-off checks refuse (person keep-out, d_min) says so and overrides them (logged).
 """
 
 from __future__ import annotations
@@ -16,11 +17,20 @@ from webui.geometry import vehicle_color
 from webui.view import OperatorActions, SceneView, VehicleView
 
 Run = Callable[[viser.ClientHandle | None, Callable[[], object], str | None], bool]
-Confirm = Callable[[viser.ClientHandle | None, str, str, str, Callable[[], object], str], None]
+Confirm = Callable[[viser.ClientHandle | None, str, str, str, Callable[[], object], str | None], None]
 
 
 def option(vehicle_id: int) -> str:
     return f"MAV {vehicle_id}"
+
+
+def releasable(vehicle: VehicleView) -> bool:
+    """Release can give it back to the formation: landed, holding, or airborne and not flown by skyring
+    (found flying, or a pilot gave it back) while its autopilot runs no failsafe."""
+    if vehicle.phase in ("landed", "holding"):
+        return True
+    free = vehicle.phase == "idle" or (vehicle.phase in ("takeoff", "formation") and vehicle.released)
+    return free and vehicle.in_air and not vehicle.failsafe
 
 
 class TeamPanel:
@@ -74,9 +84,9 @@ class TeamPanel:
         for button, label in zip((self.hold, self.land, self.release), labels, strict=True):
             if button.label != label:
                 button.label = label
-        releasable = vehicle.phase in ("landed", "holding")
-        if self.release.visible != releasable:
-            self.release.visible = releasable
+        can_release = releasable(vehicle)
+        if self.release.visible != can_release:
+            self.release.visible = can_release
         holdable = vehicle.phase in ("takeoff", "formation") and vehicle.in_air
         if self.hold.disabled == holdable:
             self.hold.disabled = not holdable
@@ -108,17 +118,20 @@ class TeamPanel:
         vehicle = self.selected()
         if vehicle is None:
             return
-        vid = vehicle.vehicle_id
-        body = (
-            f"MAV {vid} rejoins the formation from where it hovers."
-            if vehicle.phase == "holding"
-            else f"MAV {vid} **takes off again** and rejoins the formation."
-        )
+        vid, check = vehicle.vehicle_id, vehicle.takeoff_check
+        if vehicle.phase == "holding":
+            body = f"MAV {vid} rejoins the formation from where it hovers."
+        elif vehicle.in_air:
+            body = f"MAV {vid} joins the formation from where it flies."
+        else:
+            body = f"MAV {vid} **takes off again** and rejoins the formation."
+        if check:
+            body = f"MAV {vid} {check}.  \nReleasing it overrides the pre-take-off check (logged)."
         self._confirm(
             event.client,
             f"Release MAV {vid}?",
             body,
-            f"Release MAV {vid}",
-            lambda: self._actions.release(vid),
+            f"Release MAV {vid}" + (" (override)" if check else ""),
+            lambda: self._actions.release(vid, override=bool(check)),
             f"MAV {vid} released",
         )

@@ -47,11 +47,18 @@ class VehicleView:
     phase: the mission's phase name (e.g. "formation", "holding", "landing", "landed"); mode: the autopilot
     flight mode name; link_age_s: seconds since its last telemetry (stale when `link_stale`); solver_time_s:
     OSQP's time of the last solve (None before the first); battery_fraction in [0, 1] or None when unknown;
-    distance_to_person_m: horizontal distance to the fused person estimate (None without one); failsafe: the
-    autopilot's own failsafe action in progress ("" when none); arming_refused: why the autopilot last
-    refused to arm ("" when it did not); released: the autopilot or a pilot took it out of skyring's
+    in_formation: flown by formation control in the roster now; distance_to_person_m: horizontal distance to
+    the fused person estimate (None without one); released: the autopilot or a pilot took it out of skyring's
     control; fault: the controller's last fault line ("" when none); agent: its onboard agent's link (None
     when the agent runs in the station).
+
+    What the autopilot itself says (the truth when it differs from skyring's reading): autopilot_mode: its own
+    mode name (PX4: "OFFBOARD", "LAND", "HOLD", "RETURN_TO_LAUNCH", ...; "" when the back-end has none);
+    failsafe: it runs one of its own failsafes now, failsafe_reason its words for it (e.g. "battery 14 % at
+    or below 15 %: landing"); can_arm: its pre-arm checks pass (None: unknown or armed); arming_refusal: its
+    words for the last arming or take-off it refused; takeoff_check: why the ground station would not let
+    this vehicle take off or join the formation where it stands now (inside the person's keep-out, or within
+    d_min of a teammate), None when it may.
     """
 
     vehicle_id: int
@@ -68,12 +75,16 @@ class VehicleView:
     solver_time_s: float | None = None
     battery_fraction: float | None = None
     plan_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    autopilot_mode: str = ""
+    failsafe: bool = False
+    failsafe_reason: str | None = None
+    can_arm: bool | None = None
+    arming_refusal: str | None = None
+    takeoff_check: str | None = None
     agent: AgentView | None = None
     velocity_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
     plan_age_s: float | None = None
     distance_to_person_m: float | None = None
-    failsafe: str = ""
-    arming_refused: str = ""
     released: bool = False
     fault: str = ""
 
@@ -245,8 +256,10 @@ class OperatorActions(Protocol):
     def land_all(self) -> None:
         """Land every MAV."""
 
-    def release(self, vehicle_id: int) -> None:
-        """Return a landed MAV (it takes off again) or a holding one to formation control."""
+    def release(self, vehicle_id: int, *, override: bool = False) -> None:
+        """Return a landed MAV to formation control (it takes off again), a holding one (it rejoins from where
+        it hovers), or an airborne one skyring does not fly; override: let it take off or join although the
+        pre-take-off checks refuse it (logged)."""
 
     def acknowledge_alert(self, alert_id: str) -> None:
         """Mark one alert as seen; it stays in the list (KeyError-like refusal for an unknown id)."""
@@ -255,5 +268,6 @@ class OperatorActions(Protocol):
         """Mark every alert as seen; returns how many were newly acknowledged."""
         ...
 
-    def set_formation_enabled(self, enabled: bool) -> None:
-        """Start (True) or stop (False, hold position) formation control for the whole team."""
+    def set_formation_enabled(self, enabled: bool, *, override: bool = False) -> object:
+        """Start (True) or stop (False, hold position) formation control for the whole team; override: start
+        although the pre-take-off checks refuse a vehicle (logged)."""

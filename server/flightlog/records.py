@@ -263,7 +263,9 @@ class VehicleSample:
     """One MAV in a sample: as the operator saw it (`webui.view.VehicleView`) plus its velocity.
 
     position_m / velocity_mps: ENU from its autopilot; yaw_rad ENU; link_age_s: seconds since its last
-    telemetry (inf: never heard from); plan_positions_m: its latest horizon plan (empty when none)."""
+    telemetry (inf: never heard from); plan_positions_m: its latest horizon plan (empty when none);
+    autopilot_mode, failsafe, failsafe_reason, arming_refusal: what the autopilot said of itself (absent in
+    logs written before they were recorded: read as unknown)."""
 
     vehicle_id: int
     phase: str
@@ -280,6 +282,10 @@ class VehicleSample:
     solver_time_s: float | None = None
     battery_fraction: float | None = None
     plan_positions_m: tuple[Vec3, ...] = ()
+    autopilot_mode: str = ""
+    failsafe: bool = False
+    failsafe_reason: str | None = None
+    arming_refusal: str | None = None
 
     @property
     def landed(self) -> bool:
@@ -302,6 +308,10 @@ class VehicleSample:
             "solver_time_s": _out(self.solver_time_s),
             "battery_fraction": _out(self.battery_fraction),
             "plan_positions_m": [_outv(p) for p in self.plan_positions_m],
+            "autopilot_mode": self.autopilot_mode,
+            "failsafe": self.failsafe,
+            "failsafe_reason": self.failsafe_reason,
+            "arming_refusal": self.arming_refusal,
         }
 
     @classmethod
@@ -323,7 +333,19 @@ class VehicleSample:
             solver_time_s=_in_opt(obj.get("solver_time_s")),
             battery_fraction=_in_opt(obj.get("battery_fraction")),
             plan_positions_m=tuple(_inv3(p) for p in _field(obj, "plan_positions_m", list)),
+            autopilot_mode=_optional(obj, "autopilot_mode", str) or "",
+            failsafe=bool(_optional(obj, "failsafe", bool)),
+            failsafe_reason=_optional(obj, "failsafe_reason", str),
+            arming_refusal=_optional(obj, "arming_refusal", str),
         )
+
+
+def _optional(obj: dict[str, Any], name: str, kind: type) -> Any:
+    """A field added in a later release: None when absent or null, else it must have the right type."""
+    value = obj.get(name)
+    if value is not None and (not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool)):
+        raise RecordError(f"field {name!r} has the wrong type: {value!r}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -513,6 +535,10 @@ def sample_from(snapshot: MissionSnapshot, view: SceneView) -> LogSample:
             solver_time_s=None if v.solver_time_s is None else _q(v.solver_time_s),
             battery_fraction=None if v.battery_fraction is None else _q(v.battery_fraction),
             plan_positions_m=tuple(_qv3(p) for p in v.plan_positions_m),
+            autopilot_mode=v.autopilot_mode,
+            failsafe=v.failsafe,
+            failsafe_reason=v.failsafe_reason,
+            arming_refusal=v.arming_refusal,
         )
 
     e = view.person_estimate
@@ -571,6 +597,10 @@ def scene_from(sample: LogSample) -> SceneView:
             solver_time_s=v.solver_time_s,
             battery_fraction=v.battery_fraction,
             plan_positions_m=np.array(v.plan_positions_m).reshape(-1, 3),
+            autopilot_mode=v.autopilot_mode,
+            failsafe=v.failsafe,
+            failsafe_reason=v.failsafe_reason,
+            arming_refusal=v.arming_refusal,
         )
         for v in sample.vehicles
     )

@@ -178,16 +178,17 @@ def _autopilot(v: VehicleView) -> list[Condition]:
                 kind="failsafe",
                 vehicle_id=v.vehicle_id,
                 severity=Severity.CRITICAL,
-                message=f"MAV {v.vehicle_id} autopilot failsafe: {v.failsafe}",
+                message=f"MAV {v.vehicle_id} autopilot failsafe ({v.autopilot_mode or v.mode}): "
+                f"{v.failsafe_reason or 'the autopilot runs its own failsafe'}",
             )
         )
-    if v.arming_refused:
+    if v.arming_refusal:
         out.append(
             Condition(
                 kind="arming",
                 vehicle_id=v.vehicle_id,
                 severity=Severity.WARNING,
-                message=f"MAV {v.vehicle_id} refused to arm: {v.arming_refused}",
+                message=f"MAV {v.vehicle_id} refused to arm: {v.arming_refusal}",
             )
         )
     return out

@@ -15,7 +15,7 @@ import math
 from typing import Annotated
 
 import swagger_ui_bundle
-from fastapi import FastAPI, Path, Request, WebSocket, WebSocketDisconnect
+from fastapi import FastAPI, Path, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse
@@ -27,6 +27,9 @@ from server.station.ground_station import GroundStation
 from webui.view import Alert, SceneView, VehicleView
 
 Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Override = Annotated[
+    bool, Query(description="take off or join although the pre-take-off checks refuse a MAV (logged)")
+]
 
 
 class FormationModel(BaseModel):
@@ -70,7 +73,7 @@ class CommandOutcomeModel(BaseModel):
     """One operator command as one vehicle's agent answered it."""
 
     command_id: int
-    action: str = Field(description='"configure", "land" or "release"')
+    action: str = Field(description='"configure", "land", "hold" or "release"')
     outcome: str = Field(
         description='"pending", "acked", "refused" (message says why) or "failed" (timed out)'
     )
@@ -107,6 +110,18 @@ class VehicleModel(BaseModel):
     solve_status: str
     solver_time_s: float | None
     plan_positions_m: list[Vector3] = Field(description="the latest horizon plan, (N+2, 3)")
+    autopilot_mode: str = Field(
+        description='the autopilot\'s own mode (PX4: "OFFBOARD", "LAND", "HOLD", "RETURN_TO_LAUNCH", ...)'
+    )
+    failsafe: bool = Field(description="the autopilot runs one of its own failsafes now")
+    failsafe_reason: str | None = Field(description="the autopilot's words for its failsafe")
+    can_arm: bool | None = Field(description="the autopilot's pre-arm checks pass (null: unknown or armed)")
+    arming_refusal: str | None = Field(
+        description="the autopilot's words for why it refused the last take-off (null once one succeeds)"
+    )
+    takeoff_check: str | None = Field(
+        description="why this MAV may not take off or join where it stands (person keep-out, d_min), if so"
+    )
     agent: AgentModel | None = Field(default=None, description="its onboard agent (None: in-process agents)")
 
 
@@ -213,6 +228,12 @@ def vehicle_model(v: VehicleView) -> VehicleModel:
         solve_status=v.solve_status,
         solver_time_s=_num(v.solver_time_s),
         plan_positions_m=[_vec(p) for p in v.plan_positions_m],
+        autopilot_mode=v.autopilot_mode,
+        failsafe=v.failsafe,
+        failsafe_reason=v.failsafe_reason,
+        can_arm=v.can_arm,
+        arming_refusal=v.arming_refusal,
+        takeoff_check=v.takeoff_check,
         agent=None if v.agent is None else agent_model(v.agent),
     )
 
@@ -369,9 +390,13 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
         station.set_formation(d_des_m=body.d_des_m, h_des_m=body.h_des_m)
         return formation_model(station.scene_view())
 
-    @app.post("/api/formation/start", response_model=FormationStateModel)
-    async def start_formation() -> FormationStateModel:
-        station.set_formation_enabled(True)
+    @app.post(
+        "/api/formation/start",
+        response_model=FormationStateModel,
+        responses={422: {"description": "a MAV inside the person's keep-out or within d_min of a teammate"}},
+    )
+    async def start_formation(override: Override = False) -> FormationStateModel:
+        station.set_formation_enabled(True, override=override)
         return formation_model(station.scene_view())
 
     @app.post(
@@ -450,11 +475,14 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
         response_model=VehicleModel,
         responses={
             404: {"description": "no such vehicle"},
-            422: {"description": "neither landed nor holding, or the formation has no room for it"},
+            422: {
+                "description": "not landed or holding (nor airborne and free), in its autopilot's failsafe, "
+                "no room in the formation, or inside the person's keep-out or within d_min of a teammate"
+            },
         },
     )
-    async def release(vehicle_id: Annotated[int, Path()]) -> VehicleModel:
-        station.release(vehicle_id)
+    async def release(vehicle_id: Annotated[int, Path()], override: Override = False) -> VehicleModel:
+        station.release(vehicle_id, override=override)
         return _vehicle(vehicle_id)
 
     @app.post("/api/land_all", response_model=LandAllModel)

@@ -18,7 +18,12 @@ The limits come from the controller's own parameters (`limits_from_params`):
   (FieldParams.obstacle_d_min_m) inside the arena: d_des <= min half-width - d_min (18.5 m by default);
 - a virtual obstacle's centre must lie inside the arena; its radius must be positive and at most
   `max_obstacle_radius_m`; its surface must stay at least FieldParams.obstacle_d_min_m (the distance at
-  which the obstacle's repulsion saturates) from the person and from every MAV, so it never covers either.
+  which the obstacle's repulsion saturates) from the person and from every MAV, so it never covers either;
+- before a MAV takes off (start of the formation, release) or joins the formation from the air, it must stand
+  outside the person's keep-out (the person-repulsion threshold, person_clearance_fraction * d_des: 7 m at
+  the default d_des of 8 m) and at least d_min (safety_distance_m) from every teammate, horizontally: a
+  take-off climbs straight up, into the person's space or a teammate's. An explicit operator override lets
+  it go anyway, and the override is logged.
 """
 
 from __future__ import annotations
@@ -189,6 +194,60 @@ def check_obstacle(
                 f"(now {gap:.1f} m) or make it smaller"
             )
     return x, y, r
+
+
+def clearance_problems(
+    *,
+    vehicle_ids: Sequence[int],
+    vehicles_m: Mapping[int, np.ndarray],
+    persons_m: Sequence[np.ndarray],
+    limits: CommandLimits,
+    d_des_m: float,
+) -> dict[int, str]:
+    """Why each of `vehicle_ids` may not take off or join the formation where it stands (module docstring):
+    inside the person's keep-out, or within d_min of a teammate; the vehicles with no problem are left out.
+
+    vehicles_m: vehicle id -> (3,) ENU position of every MAV (all of them count as teammates); persons_m: (3,)
+    positions of the person (truth and/or estimates; none: the keep-out cannot be checked).
+    """
+    keep_out = limits.person_clearance_fraction * d_des_m
+    problems: dict[int, str] = {}
+    for vid in vehicle_ids:
+        here = vehicles_m.get(vid)
+        if here is None:
+            continue
+        reasons = []
+        for person in persons_m:
+            gap = math.hypot(float(here[0]) - float(person[0]), float(here[1]) - float(person[1]))
+            if gap < keep_out:
+                reasons.append(
+                    f"stands {gap:.1f} m from the person, inside the {keep_out:.1f} m keep-out "
+                    f"({limits.person_clearance_fraction:g} d_des)"
+                )
+                break
+        for other, there in sorted(vehicles_m.items()):
+            if other == vid:
+                continue
+            gap = math.hypot(float(here[0]) - float(there[0]), float(here[1]) - float(there[1]))
+            if gap < limits.safety_distance_m:
+                reasons.append(
+                    f"stands {gap:.1f} m from MAV {other}, closer than d_min = {limits.safety_distance_m:g} m"
+                )
+        if reasons:
+            problems[vid] = "; ".join(reasons)
+    return problems
+
+
+def check_clearance(problems: Mapping[int, str], *, action: str, override: bool) -> list[str]:
+    """CommandError naming every vehicle in `problems` (what `action` would do to it and how to proceed),
+    unless `override`: then the problems are returned for the log."""
+    lines = [f"MAV {vid} {why}" for vid, why in sorted(problems.items())]
+    if lines and not override:
+        raise CommandError(
+            f"{action} refused: " + "; ".join(lines) + ". Move it (or the person), or repeat with the "
+            "override to take off anyway (the override is logged)"
+        )
+    return lines
 
 
 def _round_up(value: float) -> float:

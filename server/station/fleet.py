@@ -485,6 +485,9 @@ class AgentFleet:
             tracker=TrackerStats(**_known(s.tracker, TrackerStats)),
             counters=AgentCounters(**_known(s.counters, AgentCounters)),
             agent=link,
+            # flies the formation: its phase, and the plan it shares says so (a released or grounded agent's
+            # plan does not), and it is heard
+            in_formation=_phase(s) == Phase.FORMATION and plan is not None and plan.in_formation and not lost,
         )
 
     def _counters(self, vehicles: Sequence[VehicleSnapshot]) -> MissionCounters:

@@ -34,8 +34,10 @@ from server.station.commands import (
     CommandError,
     CommandLimits,
     UnknownTargetError,
+    check_clearance,
     check_formation,
     check_obstacle,
+    clearance_problems,
     limits_from_params,
 )
 from vehicles.camera import CameraParams
@@ -311,16 +313,8 @@ class GroundStation:
         """Add a virtual obstacle at ENU (x_m, y_m); returns its id ("v1", "v2", ...)."""
         with self._lock:
             snap = self.snapshot()
-            vehicles = {
-                v.vehicle_id: v.autopilot.position_m for v in snap.vehicles if v.autopilot is not None
-            }
-            persons = [
-                v.person.position_m
-                for v in snap.vehicles
-                if v.person is not None and np.all(np.isfinite(v.person.position_m))
-            ]
-            if snap.person_truth is not None:
-                persons.insert(0, snap.person_truth.position_m)
+            vehicles = _positions(snap)
+            persons = _persons(snap)
             x, y, r = self._checked(
                 lambda: check_obstacle(
                     x_m=x_m,
@@ -403,18 +397,21 @@ class GroundStation:
 
     @_recorded
     def land_all(self) -> list[int]:
-        """Land every MAV that is taking off, flying or holding; returns their ids."""
+        """Land every MAV that is taking off, flying, holding or found flying; returns their ids."""
         with self._lock:
-            flying = [v.vehicle_id for v in self.snapshot().vehicles if v.phase in AIRBORNE_PHASES]
+            flying = [v.vehicle_id for v in self.snapshot().vehicles if _airborne(v)]
             self._apply(self._mission.land_all)
             return flying
 
     @_recorded
-    def release(self, vehicle_id: int) -> None:
-        """Give a landed MAV back to the formation (it takes off again while formation is enabled).
+    def release(self, vehicle_id: int, *, override: bool = False) -> list[str]:
+        """Give a landed MAV back to the formation (it takes off again while formation is enabled), or an
+        airborne one skyring does not fly (found flying, or a pilot gave it back).
 
-        Refused if the current d_des would space the enlarged team closer than the formation spacing allows.
-        A holding MAV rejoins the formation from where it hovers.
+        Refused if the current d_des would space the enlarged team closer than the formation spacing allows,
+        or if the MAV stands inside the person's keep-out or within d_min of a teammate (`override` lets it go
+        anyway: the problems are returned and logged). A holding MAV rejoins the formation from where it
+        hovers.
         """
         with self._lock:
             vehicle = self._vehicle(vehicle_id)
@@ -430,15 +427,39 @@ class GroundStation:
                             "first"
                         )
                     )
+            released = vehicle.autopilot is not None and vehicle.autopilot.released
+            overridden = []
+            if vehicle.phase in (Phase.LANDED, Phase.IDLE) or released:
+                overridden = self._check_clearance(
+                    [vehicle.vehicle_id], action=f"release of MAV {vehicle_id}", override=override
+                )
             self._apply(lambda: self._mission.release(vehicle_id))
+            return overridden
 
     @_recorded
-    def set_formation_enabled(self, enabled: bool) -> None:
-        """Start (True) or stop (False: every MAV holds position) formation control."""
+    def set_formation_enabled(self, enabled: bool, *, override: bool = False) -> list[str]:
+        """Start (True) or stop (False: every MAV holds position) formation control.
+
+        Starting takes off the MAVs waiting on the ground and brings in those found flying; it is refused
+        while one of them stands inside the person's keep-out or within d_min of a teammate, unless
+        `override` (the problems are then returned and logged).
+        """
         with self._lock:
-            if not isinstance(enabled, bool):
-                self._refuse(CommandError(f"enabled must be true or false, got {enabled!r}"))
+            if not isinstance(enabled, bool) or not isinstance(override, bool):
+                self._refuse(CommandError(f"enabled and override must be true or false, got {enabled!r}"))
+            overridden: list[str] = []
+            if enabled:
+                joining = [v.vehicle_id for v in self.snapshot().vehicles if v.phase == Phase.IDLE]
+                overridden = self._check_clearance(
+                    joining, action="start of the formation", override=override
+                )
             self._apply(lambda: self._mission.set_formation_enabled(enabled))
+            return overridden
+
+    def takeoff_checks(self) -> dict[int, str]:
+        """Why each MAV waiting to take off or join (idle or landed) may not, where it stands now."""
+        with self._lock:
+            return takeoff_checks(self.snapshot(), limits=self._limits)
 
     @_recorded
     def shutdown(self) -> None:
@@ -452,6 +473,24 @@ class GroundStation:
                     self._on_shutdown()
 
     # ---- internals ----------------------------------------------------------------------------------------
+    def _check_clearance(self, vehicle_ids: list[int], *, action: str, override: bool) -> list[str]:
+        """Refuse (CommandError, counted) a take-off or join of `vehicle_ids` that the clearance checks
+        forbid, unless override: then log and return the problems overridden."""
+        snap = self.snapshot()
+        problems = clearance_problems(
+            vehicle_ids=vehicle_ids,
+            vehicles_m=_positions(snap),
+            persons_m=_persons(snap),
+            limits=self._limits,
+            d_des_m=snap.formation.d_des_m,
+        )
+        lines = self._checked(lambda: check_clearance(problems, action=action, override=override))
+        if lines:
+            log.warning(
+                "operator override of the pre-take-off checks for the %s: %s", action, "; ".join(lines)
+            )
+        return lines
+
     def _team_size(self) -> int:
         return sum(v.phase in FLYING_PHASES for v in self.snapshot().vehicles)
 
@@ -498,14 +537,52 @@ def camera_view(params: CameraParams) -> CameraView:
     )
 
 
+def _airborne(v: VehicleSnapshot) -> bool:
+    """What LAND ALL lands: taking off, flying formation, holding, or found flying (idle in the air)."""
+    found_flying = v.phase == Phase.IDLE and v.autopilot is not None and v.autopilot.in_air
+    return v.phase in AIRBORNE_PHASES or found_flying
+
+
+def _positions(snap: MissionSnapshot) -> dict[int, np.ndarray]:
+    """Vehicle id -> (3,) ENU position of every MAV with telemetry."""
+    return {v.vehicle_id: v.autopilot.position_m for v in snap.vehicles if v.autopilot is not None}
+
+
+def _persons(snap: MissionSnapshot) -> list[np.ndarray]:
+    """(3,) positions of the person: the truth (simulated person), then every finite fused estimate."""
+    persons = [
+        v.person.position_m
+        for v in snap.vehicles
+        if v.person is not None and np.all(np.isfinite(v.person.position_m))
+    ]
+    if snap.person_truth is not None:
+        persons.insert(0, snap.person_truth.position_m)
+    return persons
+
+
+def takeoff_checks(snap: MissionSnapshot, *, limits: CommandLimits) -> dict[int, str]:
+    """Why each MAV waiting to take off or join (idle, or landed awaiting release) may not where it stands
+    (server/station/commands.py, clearance_problems); MAVs with no problem are left out."""
+    waiting = [v.vehicle_id for v in snap.vehicles if v.phase in (Phase.IDLE, Phase.LANDED)]
+    return clearance_problems(
+        vehicle_ids=waiting,
+        vehicles_m=_positions(snap),
+        persons_m=_persons(snap),
+        limits=limits,
+        d_des_m=snap.formation.d_des_m,
+    )
+
+
 def vehicle_view(
     v: VehicleSnapshot,
     *,
     link_stale_s: float,
     now_s: float | None = None,
     person_m: np.ndarray | None = None,
+    takeoff_check: str | None = None,
 ) -> VehicleView:
-    """One vehicle as the operator sees it (the autopilot's reported pose; stale when telemetry is old).
+    """One vehicle as the operator sees it (the autopilot's reported pose; stale when telemetry is old), with
+    what its autopilot says of itself and why it may not take off where it stands (`takeoff_check`).
     now_s: mission time of the view, for the plan's age (None: not known); person_m (3,): where the person is
     believed to be, for the distance to the person."""
     s = v.autopilot
@@ -520,7 +597,7 @@ def vehicle_view(
         mode=s.mode.value if s is not None else "unknown",
         armed=bool(s.armed) if s is not None else False,
         in_air=bool(s.in_air) if s is not None else False,
-        in_formation=v.phase == Phase.FORMATION,
+        in_formation=v.in_formation,
         position_m=s.position_m if s is not None else np.zeros(3),
         yaw_rad=s.yaw_rad if s is not None else 0.0,
         link_age_s=age,
@@ -534,10 +611,14 @@ def vehicle_view(
         velocity_mps=s.velocity_mps if s is not None else np.zeros(3),
         plan_age_s=max(0.0, now_s - v.plan.stamp_s) if v.plan is not None and now_s is not None else None,
         distance_to_person_m=distance,
-        failsafe=s.failsafe if s is not None else "",
-        arming_refused=s.arming_refused if s is not None else "",
         released=bool(s.released) if s is not None else False,
         fault=v.fault or "",
+        autopilot_mode=(s.autopilot_mode or s.mode.name) if s is not None else "",
+        failsafe=bool(s.failsafe) if s is not None else False,
+        failsafe_reason=s.failsafe_reason if s is not None else None,
+        can_arm=s.can_arm if s is not None else None,
+        arming_refusal=s.arming_refusal if s is not None else None,
+        takeoff_check=takeoff_check,
         agent=agent_view(v.agent) if v.agent is not None else None,
     )
 
@@ -590,10 +671,17 @@ def scene_view(
     team = sum(v.phase in FLYING_PHASES for v in snap.vehicles)
     d_range, h_range = limits.d_des_range_m(max(team, 1)), limits.h_des_range_m()
     person = best[2].position_m if best else truth
+    checks = takeoff_checks(snap, limits=limits)
     return SceneView(
         time_s=snap.stamp_s,
         vehicles=tuple(
-            vehicle_view(v, link_stale_s=link_stale_s, now_s=snap.stamp_s, person_m=person)
+            vehicle_view(
+                v,
+                link_stale_s=link_stale_s,
+                now_s=snap.stamp_s,
+                person_m=person,
+                takeoff_check=checks.get(v.vehicle_id),
+            )
             for v in snap.vehicles
         ),
         obstacles=snap.obstacles,

@@ -6,6 +6,11 @@ person and the camera/detector stay the embedded model, driven by the vehicles' 
 time runs from 0 at real time; telemetry is stamped on it so link ages in the operator's view are right,
 while each vehicle's set-point watchdog runs on the wall clock in its back-end and so fires even when the
 control loop stalls.
+
+The vehicles are taken as they are found: a fresh team on the ground takes off at once (formation running),
+as before; but when a vehicle is already flying (an earlier ground station left it, or PX4 runs a failsafe),
+or one stands where it may not take off (inside the person's keep-out, within d_min of a teammate), the
+formation starts stopped, nothing is commanded, and the operator starts it (`start_hold_reasons`).
 """
 
 from __future__ import annotations
@@ -17,8 +22,9 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from controller.params import ControllerParams, Method
+from controller.params import ControllerParams, FormationParams, Method
 from server.flightlog.log import FlightLog
+from server.station.commands import clearance_problems, limits_from_params
 from server.station.ground_station import GroundStation
 from server.station.live import PaceStats, Urls, serve_station
 from vehicles.links import SimLinks
@@ -56,6 +62,34 @@ def px4_urls(*, urls: Sequence[str] = (), sitl: int = 0) -> list[str]:
     return list(urls)
 
 
+def start_hold_reasons(
+    fleet: Px4Fleet, *, person_xyz_m: np.ndarray | None, controller_params: ControllerParams
+) -> list[str]:
+    """Why the formation must start stopped over these vehicles (empty: it may start at once): a vehicle
+    already armed or flying (adopted as it is), or one the pre-take-off checks refuse where it stands."""
+    reasons = []
+    positions = {}
+    for a in fleet.autopilots:
+        s = a.state()
+        if s is None:
+            reasons.append(f"MAV {a.vehicle_id} has no position yet")
+            continue
+        positions[a.vehicle_id] = s.position_m
+        if s.in_air or s.armed:
+            fs = f", PX4 failsafe: {s.failsafe_reason}" if s.failsafe else ""
+            where = "flying" if s.in_air else "armed on the ground"
+            reasons.append(f"MAV {a.vehicle_id} is {where} in {s.autopilot_mode or s.mode.value}{fs}")
+    problems = clearance_problems(
+        vehicle_ids=sorted(positions),
+        vehicles_m=positions,
+        persons_m=[] if person_xyz_m is None else [person_xyz_m],
+        limits=limits_from_params(controller_params),
+        d_des_m=FormationParams().d_des_m,
+    )
+    reasons += [f"MAV {vid} {why}" for vid, why in sorted(problems.items())]
+    return reasons
+
+
 def build_px4_station(
     fleet: Px4Fleet,
     *,
@@ -70,7 +104,8 @@ def build_px4_station(
 
     Mission time starts at 0 (the person's script runs from there) and the live runner paces it at real time;
     the vehicles' telemetry is stamped on it (its age carried over from the wall clock), so link ages are
-    right even when the runner falls behind."""
+    right even when the runner falls behind. The formation starts running unless `start_hold_reasons` gives
+    a reason (each is logged as a warning)."""
     streams = SeedStreams.from_seed(seed)
     model = make_person(person, streams)
     ids = [a.vehicle_id for a in fleet.autopilots]
@@ -81,11 +116,16 @@ def build_px4_station(
         person=model, obstacles=obstacles, bodies=[TelemetryBody(a) for a in fleet.autopilots], rngs=rngs
     )
     links = SimLinks(vehicle_ids=ids, rng=np.random.default_rng(streams.links))
+    params = ControllerParams(method=method)
+    holds = start_hold_reasons(fleet, person_xyz_m=world.person_truth().position_m, controller_params=params)
+    for reason in holds:
+        log.warning("formation starts stopped: %s; start it from the operator page when ready", reason)
     mission = Mission(
         autopilots=fleet.autopilots,
         world=world,
         links=links,
-        controller_params=ControllerParams(method=method),
+        controller_params=params,
+        formation_enabled=not holds,
         clock=time.perf_counter,
     )
     ref = fleet.reference

@@ -121,6 +121,14 @@ def click_ground(opened, fraction: tuple[float, float]) -> None:
     canvas.click(position={"x": fraction[0] * size["width"], "y": fraction[1] * size["height"]}, force=True)
 
 
+def start_placing_an_obstacle(frame) -> None:
+    """Press "Add obstacle" and wait for the station's prompt: it comes after the station asked the page for
+    scene clicks, so a click from now on reaches it (one sooner is not sent at all)."""
+    frame.get_by_text("Add obstacle, then click the ground", exact=True).click()
+    prompt = frame.get_by_text("Click on the ground where the obstacle should stand.", exact=True)
+    expect(prompt).to_be_visible()
+
+
 def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_api(live, operator_page):
     camera = operator_page.client.camera
     before = {o.obstacle_id for o in live.station.snapshot().obstacles}
@@ -128,7 +136,7 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     radius = number_input(operator_page.operator, "radius (m)")
     radius.fill("1")
     radius.press("Enter")
-    operator_page.operator.get_by_text("Add obstacle, then click the ground", exact=True).click()
+    start_placing_an_obstacle(operator_page.operator)
     point, fraction = clear_ground_point(live, camera)
     click_ground(operator_page, fraction)
     live.wait_for(
@@ -154,11 +162,20 @@ def test_an_obstacle_clicked_onto_the_person_is_refused_with_a_notification(live
     radius = number_input(operator_page.operator, "radius (m)")
     radius.fill("5")  # the person walks on while the browser clicks: cover 6.5 m about them
     radius.press("Enter")
-    operator_page.operator.get_by_text("Add obstacle, then click the ground", exact=True).click()
-    person = np.array(live.station.snapshot().person_truth.position_m)
-    click_ground(operator_page, ground_to_canvas_fraction(camera, person * [1.0, 1.0, 0.0]))
-    expect(operator_page.operator.get_by_text("would cover the person", exact=False)).to_be_visible()
-    assert [o.obstacle_id for o in live.station.snapshot().obstacles] == before
+    # Look at the person, so that they show in the middle of the canvas, clear of the floating windows and
+    # notifications at its edges (where the default view may show them as they walk).
+    kept = (np.array(camera.position), np.array(camera.look_at))
+    camera.look_at = live.station.snapshot().person_truth.position_m * [1.0, 1.0, 0.0]
+    asked_s = camera.update_timestamp  # the page's own report of its camera comes later
+    live.wait_for(lambda: camera.update_timestamp > asked_s, sim_s=20.0, what="the page turns its camera")
+    try:
+        start_placing_an_obstacle(operator_page.operator)
+        person = np.array(live.station.snapshot().person_truth.position_m)
+        click_ground(operator_page, ground_to_canvas_fraction(camera, person * [1.0, 1.0, 0.0]))
+        expect(operator_page.operator.get_by_text("would cover the person", exact=False)).to_be_visible()
+        assert [o.obstacle_id for o in live.station.snapshot().obstacles] == before
+    finally:
+        camera.position, camera.look_at = kept
 
 
 def test_plots_follow_the_covariance_trace_and_the_tracking_error(live):

@@ -131,13 +131,38 @@ def test_status_colour_follows_the_worst_active_alert_then_the_phase():
 
 def test_the_detail_lists_position_velocity_battery_link_solver_failsafe_and_alerts():
     text = vehicle_detail_markdown(
-        mav(3, failsafe="battery 14 % at or below 15 %: landing"), [alert("a4", 3, Severity.CRITICAL)]
+        mav(3, failsafe=True, failsafe_reason="battery 14 % at or below 15 %: landing"),
+        [alert("a4", 3, Severity.CRITICAL)],
     )
-    assert "**MAV 3**: formation, mode offboard, armed, in air" in text
+    assert "**MAV 3**: formation · in formation, autopilot offboard, armed, in air" in text
     assert "position (1.0, 2.0, 9.2) m" in text and "velocity (0.3, 0.4, 0.0) m/s" in text
     assert "battery 87 %" in text and "distance to person 8.0 m" in text
-    assert "autopilot failsafe: **battery 14 % at or below 15 %: landing**" in text
+    assert "**FAILSAFE**: battery 14 % at or below 15 %: landing" in text
     assert "- critical: MAV 3 battery low" in text
+
+
+def test_the_detail_and_the_table_show_the_autopilots_own_mode_and_its_failsafe_with_its_reason():
+    v = mav(2, autopilot_mode="LAND", failsafe=True, failsafe_reason="Failsafe activated: switching to Land")
+    text = vehicle_detail_markdown(v, [])
+    assert "autopilot LAND" in text
+    assert "**FAILSAFE**: Failsafe activated: switching to Land" in text
+    assert "FAILSAFE" not in vehicle_detail_markdown(mav(2), [])
+    row = team_table_html(scene([v]), {2: (0, 0, 0)}).split('<tr data-vehicle="2">')[1]
+    assert ">LAND<" in row
+
+
+def test_the_detail_shows_why_the_autopilot_refused_to_arm_and_why_it_may_not_take_off_here():
+    v = mav(
+        1,
+        phase="takeoff",
+        arming_refusal="Arming denied: Resolve system health failures first (Vehicle is in safety "
+        "configuration)",
+        takeoff_check="stands 3.0 m from the person, inside the 7.0 m keep-out (0.875 d_des)",
+    )
+    text = vehicle_detail_markdown(v, [])
+    assert "**ARMING REFUSED**: Arming denied: Resolve system health failures first" in text
+    assert "safety configuration" in text
+    assert "**CANNOT TAKE OFF HERE**: stands 3.0 m from the person" in text
 
 
 def test_the_alert_table_shows_each_alert_with_time_state_and_severity():

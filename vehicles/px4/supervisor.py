@@ -6,11 +6,21 @@ offboard-loss failsafe; so skyring watches the age of the agent's output itself:
 PX4 (a failsafe) is *released*: skyring stops streaming and does not switch back until re-engaged (takeoff);
 while a pilot flies it (a manual mode) skyring's land and hold requests are not sent either.
 
+A take-off PX4 refuses (its arming checks fail) is not hammered: it is tried again `refused_retry_s` later,
+and only once PX4 reports it can arm. A vehicle PX4 takes over for one of its own failsafes (Land, Hold,
+Return) is released at once, before the set-point watchdog would have its say: PX4's decision stands. And
+when PX4 ran a failsafe while skyring flew it but is back in offboard by the time skyring looks (the whole
+ground station stalled past COM_OF_LOSS_T; on waking, MAVSDK re-sends its last, stale set-point, which ends
+PX4's offboard-loss failsafe at once), skyring lands it: the failsafe's landing stands.
+
 Pure and clock-free: the asyncio back-end (vehicles/px4/autopilot.py) reports set-points and telemetry
 observations, and executes the one `Command` that `step` returns. Engagement:
 
     IDLE -takeoff-> TAKING_OFF -in Hold at height-> ENGAGING -pre-streamed-> FOLLOWING
+    TAKING_OFF -refused-> TAKING_OFF (again after refused_retry_s, once PX4 can arm)
     FOLLOWING -stale output-> WATCHDOG_HOLD -fresh output-> ENGAGING ; -stale longer-> LANDING
+    FOLLOWING -PX4 reported a failsafe, yet shows offboard-> LANDING (failsafe_landing)
+    FOLLOWING -the supervisor itself stalled past stall_land_after_s-> LANDING (failsafe_landing)
     any -land-> LANDING (latched) -on the ground, disarmed-> IDLE
     FOLLOWING/ENGAGING/holds -mode changed by someone else-> RELEASED -takeoff-> ENGAGING or TAKING_OFF
 """
@@ -51,20 +61,27 @@ class SupervisorParams:
     """hold_after_s / land_after_s: agent output age (s) that triggers Hold / Land; prestream_s: set-points
     streamed before switching to offboard (PX4 >= 1.14 wants > 1 s at > 2 Hz); retry_after_s: a command whose
     effect does not show is sent again after this; mode_grace_s: how long a mode change may take to appear in
-    telemetry (PX4 sends its heartbeat at 1 Hz), during which the old mode is not read as someone else's."""
+    telemetry (PX4 sends its heartbeat at 1 Hz), during which the old mode is not read as someone else's;
+    refused_retry_s: a take-off PX4 refused (or that failed) is tried again after this, once PX4 can arm;
+    stall_land_after_s: the supervisor itself did not run for this long while following (the whole ground
+    station stalled, MAVSDK's threads with it): PX4 has been without set-points past its offboard-loss
+    timeout (COM_OF_LOSS_T, 1 s) and runs its failsafe, which MAVSDK's stale set-point is about to end: land
+    at once."""
 
     hold_after_s: float = 0.5
     land_after_s: float = 5.0
     prestream_s: float = 1.2
     retry_after_s: float = 1.0
     mode_grace_s: float = 2.0
+    refused_retry_s: float = 10.0
+    stall_land_after_s: float = 2.0
 
     def __post_init__(self) -> None:
         if not (0.0 < self.hold_after_s < self.land_after_s and math.isfinite(self.land_after_s)):
             raise ValueError(
                 f"need 0 < hold_after_s < land_after_s, got {self.hold_after_s} and {self.land_after_s}"
             )
-        for name in ("prestream_s", "retry_after_s", "mode_grace_s"):
+        for name in ("prestream_s", "retry_after_s", "mode_grace_s", "refused_retry_s", "stall_land_after_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be a non-negative number of seconds, got {value}")
@@ -72,13 +89,20 @@ class SupervisorParams:
 
 @dataclass(frozen=True)
 class Observation:
-    """The vehicle as telemetry shows it at now_s (seconds, the back-end's clock)."""
+    """The vehicle as telemetry shows it at now_s (seconds, the back-end's clock). failsafe: PX4 runs one of
+    its own failsafes; failsafe_reported: PX4 reported running one (a critical heartbeat, or its Land) since
+    the previous observation, even if it no longer does; can_arm: PX4's pre-arm checks pass in its current
+    mode (None: not known); stalled_s: seconds since the supervisor's previous step (its loop's own gap)."""
 
     now_s: float
     mode: FlightMode
     armed: bool
     in_air: bool
     link_lost: bool = False
+    failsafe: bool = False
+    failsafe_reported: bool = False
+    can_arm: bool | None = None
+    stalled_s: float = 0.0
 
 
 # What each command should make the flight mode show.
@@ -102,6 +126,10 @@ class OffboardSupervisor:
         self.ignored_requests = 0
         self.watchdog_holds = 0
         self.watchdog_landings = 0
+        self.takeoff_failures = 0
+        self.failsafe_landing = False  # landing because PX4 ran a failsafe while skyring flew it
+        self.stall_s: float | None = None  # how long the ground station stalled, if that began the landing
+        self._takeoff_failed_s: float | None = None  # a take-off that failed and waits to be tried again
         self._last_setpoint_s: float | None = None
         self._stream_start_s = -math.inf  # when the current uninterrupted set-point stream began
         self._streamed_since_engaged = False
@@ -133,10 +161,18 @@ class OffboardSupervisor:
             self._streamed_since_engaged = True
         return True
 
-    def command_failed(self, command: Command) -> None:
-        """The back-end could not get `command` through (denied, timed out); it is retried or given up."""
+    def command_failed(self, command: Command, now_s: float) -> None:
+        """The back-end could not get `command` through at now_s (PX4 denied it, or it timed out). A take-off
+        is tried again after refused_retry_s, once PX4 reports it can arm; other commands are retried by the
+        state they belong to."""
         if command is Command.TAKEOFF and self.engagement is Engagement.TAKING_OFF:
-            self.engagement = Engagement.IDLE
+            self._takeoff_failed_s = now_s
+            self.takeoff_failures += 1
+
+    @property
+    def takeoff_failed(self) -> bool:
+        """The last take-off failed and waits to be tried again."""
+        return self._takeoff_failed_s is not None and self.engagement is Engagement.TAKING_OFF
 
     # ---- outputs -----------------------------------------------------------------------------------------
     @property
@@ -160,6 +196,9 @@ class OffboardSupervisor:
     def step(self, obs: Observation) -> Command | None:
         """Advance the state machine with one observation; the command to issue now, if any."""
         command = self._apply_requests(obs)
+        if command is not None:
+            return self._issue(command, obs.now_s)
+        command = self._px4_failsafe_while_engaged(obs)
         if command is not None:
             return self._issue(command, obs.now_s)
         handler = {
@@ -231,6 +270,7 @@ class OffboardSupervisor:
                 else:
                     self.engagement = Engagement.TAKING_OFF
                     self._streamed_since_engaged = False
+                    self._takeoff_failed_s = None
                     command = Command.TAKEOFF
         return command
 
@@ -251,7 +291,12 @@ class OffboardSupervisor:
 
     def _release(self, obs: Observation) -> None:
         self.engagement = Engagement.RELEASED
-        self.released_reason = f"left offboard for {obs.mode.value}: skyring released control"
+        self._takeoff_failed_s = None
+        self.failsafe_landing = False
+        if obs.failsafe:
+            self.released_reason = f"PX4 failsafe ({obs.mode.value}): skyring released control"
+        else:
+            self.released_reason = f"left offboard for {obs.mode.value}: skyring released control"
 
     def _fresh(self, now_s: float) -> bool:
         return self.setpoint_age_s(now_s) <= self.params.hold_after_s
@@ -261,18 +306,30 @@ class OffboardSupervisor:
 
     def _taking_off(self, obs: Observation) -> Command | None:
         if obs.in_air and obs.mode is FlightMode.HOLD and not self._in_grace(obs.now_s):
+            self._takeoff_failed_s = None
             self._engage(obs)  # PX4 finished the takeoff and holds
             return None
         if self._foreign_mode(obs, (FlightMode.TAKEOFF, FlightMode.HOLD, FlightMode.READY)):
             self._release(obs)
             return None
-        if not obs.in_air and not obs.armed and self._due_retry(Command.TAKEOFF, obs):
+        if obs.in_air or obs.armed:
+            self._takeoff_failed_s = None
+            return None
+        if self._takeoff_failed_s is not None:
+            # PX4 refused (or never answered): again once it can arm, and not before refused_retry_s.
+            if obs.can_arm is False or obs.link_lost:
+                return None
+            if obs.now_s - self._takeoff_failed_s < self.params.refused_retry_s:
+                return None
+            self._takeoff_failed_s = None
+            return Command.TAKEOFF
+        if self._due_retry(Command.TAKEOFF, obs):
             return Command.TAKEOFF  # the takeoff did not happen (lost command, or disarmed again)
         return None
 
     def _engaging(self, obs: Observation) -> Command | None:
-        if obs.mode is FlightMode.OFFBOARD:
-            self.engagement = Engagement.FOLLOWING
+        if obs.mode is FlightMode.OFFBOARD and self._last_command is Command.START_OFFBOARD:
+            self.engagement = Engagement.FOLLOWING  # (an Offboard read before skyring asked for it is stale)
             return None
         if self._foreign_mode(obs, (FlightMode.HOLD, FlightMode.OFFBOARD, self._engaged_from)):
             self._release(obs)
@@ -289,6 +346,9 @@ class OffboardSupervisor:
         return None
 
     def _following(self, obs: Observation) -> Command | None:
+        if self._foreign_mode(obs, (FlightMode.OFFBOARD,)):
+            self._release(obs)  # PX4 (a failsafe) or a pilot took it: their decision stands
+            return None
         age = self.setpoint_age_s(obs.now_s)
         if age > self.params.land_after_s:
             return self._watchdog_land()
@@ -296,8 +356,6 @@ class OffboardSupervisor:
             self.engagement = Engagement.WATCHDOG_HOLD
             self.watchdog_holds += 1
             return Command.HOLD
-        if self._foreign_mode(obs, (FlightMode.OFFBOARD,)):
-            self._release(obs)
         return None
 
     def _watchdog_hold(self, obs: Observation) -> Command | None:
@@ -328,6 +386,7 @@ class OffboardSupervisor:
     def _landing(self, obs: Observation) -> Command | None:
         if not obs.in_air and not obs.armed:
             self.engagement = Engagement.IDLE
+            self.failsafe_landing = False
             return None
         if self._foreign_mode(obs, (FlightMode.LAND, FlightMode.HOLD, FlightMode.OFFBOARD, FlightMode.READY)):
             self._release(obs)  # a pilot took over during the landing
@@ -341,6 +400,31 @@ class OffboardSupervisor:
             self.engagement = Engagement.IDLE
             self.released_reason = None
         return None
+
+    def _px4_failsafe_while_engaged(self, obs: Observation) -> Command | None:
+        """Land a vehicle PX4 ran a failsafe on while skyring flew it, whatever its mode reads now: after a
+        stall of the whole ground station (PX4 lost the set-points past its timeout, and what telemetry shows
+        now may be from before), or when PX4 reported a failsafe it has already left (MAVSDK's stale set-point
+        ends its offboard-loss failsafe at once). A failsafe PX4 still runs is left to it (`_foreign_mode`).
+        """
+        offboard = (Engagement.FOLLOWING, Engagement.ENGAGING)
+        if self.engagement in offboard and obs.stalled_s > self.params.stall_land_after_s:
+            return self._failsafe_land(stall_s=obs.stalled_s)
+        held = (*offboard, Engagement.WATCHDOG_HOLD, Engagement.HOLDING)
+        if (
+            self.engagement in held
+            and obs.failsafe_reported
+            and not obs.link_lost
+            and obs.mode in (FlightMode.OFFBOARD, FlightMode.HOLD)
+        ):
+            return self._failsafe_land(stall_s=None)
+        return None
+
+    def _failsafe_land(self, *, stall_s: float | None) -> Command:
+        self.engagement = Engagement.LANDING
+        self.failsafe_landing = True
+        self.stall_s = stall_s
+        return Command.LAND
 
     def _watchdog_land(self) -> Command:
         self.engagement = Engagement.LANDING

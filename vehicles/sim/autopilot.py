@@ -152,8 +152,9 @@ class SimAutopilot:
                 healthy=True,
                 position_cov_m2=self._cov,
                 released=self._released,
-                failsafe=self._failsafe,
-                arming_refused=self._arming_refused,
+                failsafe=bool(self._failsafe),
+                failsafe_reason=self._failsafe or None,
+                arming_refusal=self._arming_refused or None,
             )
         return self._state
 

@@ -167,10 +167,19 @@ def test_ticks_slower_than_their_period_are_behind_real_time_before_the_achieved
 
 def test_autopilot_failsafe_is_critical_and_arming_refused_a_warning():
     view = scene(
-        mav(1, failsafe="battery 14 % at or below 15 %: landing"), mav(2, (8, 8, 9), arming_refused="x")
+        mav(1, failsafe=True, failsafe_reason="battery 14 % at or below 15 %: landing"),
+        mav(2, (8, 8, 9), arming_refusal="x"),
     )
     found = kinds(view)
     assert found["failsafe"] == Severity.CRITICAL and found["arming"] == Severity.WARNING
+
+
+def test_a_failsafe_alert_names_the_autopilots_mode_and_its_words_or_says_it_has_none():
+    landing = mav(1, autopilot_mode="LAND", failsafe=True, failsafe_reason="Low battery")
+    (c,) = conditions(scene(landing), PARAMS)
+    assert c.message == "MAV 1 autopilot failsafe (LAND): Low battery"
+    (c,) = conditions(scene(mav(1, failsafe=True)), PARAMS)
+    assert c.message == "MAV 1 autopilot failsafe (offboard): the autopilot runs its own failsafe"
 
 
 def test_a_braking_solver_is_a_warning_with_its_fault():

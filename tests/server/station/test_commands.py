@@ -12,8 +12,10 @@ from controller.params import ControllerParams, FormationParams
 from server.station.commands import (
     CommandError,
     CommandLimits,
+    check_clearance,
     check_formation,
     check_obstacle,
+    clearance_problems,
     limits_from_params,
 )
 
@@ -141,3 +143,58 @@ def test_obstacle_beyond_the_count_limit_is_refused():
     limits = CommandLimits(max_virtual_obstacles=2)
     with pytest.raises(CommandError, match="already 2 virtual obstacles"):
         obstacle(limits=limits, virtual_count=2)
+
+
+def clearance(vehicles_m, *, ids=None, persons=PERSON, d_des_m=8.0):
+    return clearance_problems(
+        vehicle_ids=list(vehicles_m) if ids is None else ids,
+        vehicles_m=vehicles_m,
+        persons_m=persons,
+        limits=LIMITS,
+        d_des_m=d_des_m,
+    )
+
+
+def test_keep_out_is_the_person_repulsion_threshold_seven_eighths_of_d_des():
+    # 7 m at d_des 8: a MAV 6.9 m away is inside, one 7.1 m away is not
+    problems = clearance({1: np.array([6.9, 0.0, 0.0]), 2: np.array([0.0, 7.1, 0.0])})
+    assert list(problems) == [1]
+    assert "6.9 m from the person, inside the 7.0 m keep-out" in problems[1]
+
+
+def test_keep_out_grows_with_d_des():
+    assert list(clearance({1: np.array([7.5, 0.0, 0.0])}, d_des_m=10.0)) == [1]  # keep-out 8.75 m
+
+
+def test_keep_out_is_measured_horizontally():
+    # right above the person at 8.9 m is still inside: a take-off climbs straight up
+    assert list(clearance({1: np.array([3.0, 0.0, 8.9])})) == [1]
+
+
+def test_teammates_closer_than_d_min_are_both_named():
+    problems = clearance({1: np.array([8.0, 0.0, 0.0]), 2: np.array([8.0, 1.2, 0.0])})
+    assert sorted(problems) == [1, 2]
+    assert "1.2 m from MAV 2, closer than d_min = 1.5 m" in problems[1]
+
+
+def test_only_the_vehicles_asked_about_are_checked_but_all_count_as_teammates():
+    vehicles = {1: np.array([8.0, 0.0, 0.0]), 2: np.array([8.0, 1.0, 8.9])}
+    assert list(clearance(vehicles, ids=[1])) == [1]
+
+
+def test_no_person_known_means_no_keep_out_check():
+    assert clearance({1: np.array([1.0, 0.0, 0.0])}, persons=[]) == {}
+
+
+def test_a_refused_clearance_names_every_vehicle_and_the_override():
+    with pytest.raises(CommandError, match="start refused: MAV 3 stands.*MAV 4 stands.*override"):
+        check_clearance(
+            {4: "stands 1.0 m from MAV 3", 3: "stands 2.0 m from the person"}, action="start", override=False
+        )
+
+
+def test_an_overridden_clearance_returns_what_was_overridden():
+    assert check_clearance({3: "stands 2.0 m from the person"}, action="start", override=True) == [
+        "MAV 3 stands 2.0 m from the person"
+    ]
+    assert check_clearance({}, action="start", override=False) == []

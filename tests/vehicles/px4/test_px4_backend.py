@@ -13,6 +13,7 @@ from vehicles.px4.autopilot import (
     Px4Autopilot,
     Px4Config,
     check_setpoint,
+    frozen,
     ned_setpoint,
     sitl_urls,
     skyring_mode,
@@ -100,8 +101,12 @@ def test_sitl_urls_follow_px4_instance_ports():
 
 def test_failsafe_params_are_typed_for_px4():
     params = Px4Config(offboard_loss_action=5, datalink_loss_action=1).failsafe_params()
-    assert params == {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 5, "NAV_DLL_ACT": 1}
+    assert params == {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 5, "NAV_DLL_ACT": 1, "COM_LOW_BAT_ACT": 2}
     assert isinstance(params["COM_OF_LOSS_T"], float) and isinstance(params["COM_OBL_RC_ACT"], int)
+
+
+def test_battery_failsafe_is_left_alone_when_asked():
+    assert "COM_LOW_BAT_ACT" not in Px4Config(low_battery_action=None).failsafe_params()
 
 
 @pytest.mark.parametrize(
@@ -109,6 +114,7 @@ def test_failsafe_params_are_typed_for_px4():
     [
         {"offboard_loss_action": 0},
         {"datalink_loss_action": 4},
+        {"low_battery_action": 1},
         {"link_lost_after_s": 0.0},
         {"connect_timeout_s": math.nan},
     ],
@@ -136,3 +142,11 @@ def test_takeoff_height_out_of_range_is_refused_and_counted():
     a.takeoff(500.0)
     assert a.status().failed_commands == 2
     assert "[0.5, 120]" in str(a.status().fault)
+
+
+def test_a_stopped_process_stood_frozen_a_busy_or_starved_one_did_not():
+    assert frozen(6.0, 0.0)  # SIGSTOP: no thread ran
+    assert frozen(2.5, 0.03)  # (the instants before and after the stop)
+    assert not frozen(2.5, 2.5)  # the event loop was busy: the process ran flat out
+    assert not frozen(2.5, 0.2)  # starved on a loaded machine, but MAVSDK's threads got some CPU
+    assert not frozen(0.0, 0.0)

@@ -1,5 +1,5 @@
-"""The PX4 engagement state machine: takeoff, pre-streaming, watchdog, release
-(vehicles/px4/supervisor.py)."""
+"""The PX4 engagement state machine: takeoff, refused take-offs, pre-streaming, watchdog, release to a pilot
+or to PX4's failsafe (vehicles/px4/supervisor.py)."""
 
 from __future__ import annotations
 
@@ -8,11 +8,26 @@ import pytest
 from vehicles.autopilot import FlightMode
 from vehicles.px4.supervisor import Command, Engagement, Observation, OffboardSupervisor, SupervisorParams
 
-P = SupervisorParams(hold_after_s=0.5, land_after_s=3.0, prestream_s=1.0, retry_after_s=1.0, mode_grace_s=1.0)
+P = SupervisorParams(
+    hold_after_s=0.5,
+    land_after_s=3.0,
+    prestream_s=1.0,
+    retry_after_s=1.0,
+    mode_grace_s=1.0,
+    refused_retry_s=5.0,
+)
 
 
-def obs(t, mode=FlightMode.HOLD, *, armed=True, in_air=True, link_lost=False):
-    return Observation(now_s=t, mode=mode, armed=armed, in_air=in_air, link_lost=link_lost)
+def obs(t, mode=FlightMode.HOLD, *, armed=True, in_air=True, link_lost=False, failsafe=False, can_arm=None):
+    return Observation(
+        now_s=t,
+        mode=mode,
+        armed=armed,
+        in_air=in_air,
+        link_lost=link_lost,
+        failsafe=failsafe,
+        can_arm=can_arm,
+    )
 
 
 def run(sup, t0, t1, mode, *, setpoints=True, dt=0.05, **kw):
@@ -170,14 +185,47 @@ def test_operator_hold_then_new_setpoints_follow_again():
     assert [c for _, c in cmds] == [Command.START_OFFBOARD]
 
 
-def test_failed_takeoff_returns_to_idle_so_it_can_be_asked_again():
+def test_refused_takeoff_is_tried_again_after_refused_retry_s_not_every_request():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False, can_arm=True))
+    sup.command_failed(Command.TAKEOFF, 0.1)
+    assert sup.takeoff_failed and sup.takeoff_failures == 1
+    sup.request_takeoff(5.0)  # the mission keeps asking: no new attempt before refused_retry_s
+    cmds = run(sup, 0.2, 6.0, FlightMode.READY, setpoints=False, armed=False, in_air=False, can_arm=True)
+    assert [c for _, c in cmds] == [Command.TAKEOFF]
+    assert cmds[0][0] == pytest.approx(5.1, abs=0.06)
+
+
+def test_refused_takeoff_waits_while_px4_says_it_cannot_arm_then_tries_once_it_can():
     sup = OffboardSupervisor(P)
     sup.request_takeoff(5.0)
     sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
-    sup.command_failed(Command.TAKEOFF)
-    assert sup.engagement is Engagement.IDLE
+    sup.command_failed(Command.TAKEOFF, 0.0)
+    ground = {"armed": False, "in_air": False, "setpoints": False}
+    assert run(sup, 0.05, 20.0, FlightMode.READY, can_arm=False, **ground) == []
+    assert run(sup, 20.0, 20.2, FlightMode.READY, can_arm=True, **ground) == [(20.0, Command.TAKEOFF)]
+
+
+def test_a_successful_takeoff_clears_the_refusal():
+    sup = OffboardSupervisor(P)
     sup.request_takeoff(5.0)
-    assert sup.step(obs(1.0, FlightMode.READY, armed=False, in_air=False)) is Command.TAKEOFF
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    sup.command_failed(Command.TAKEOFF, 0.0)
+    run(sup, 5.0, 5.2, FlightMode.READY, setpoints=False, armed=False, in_air=False, can_arm=True)
+    run(sup, 5.2, 8.0, FlightMode.TAKEOFF, setpoints=False)
+    assert not sup.takeoff_failed
+    run(sup, 8.0, 9.5, FlightMode.HOLD, setpoints=False)
+    assert sup.engagement is Engagement.ENGAGING
+
+
+def test_px4_failsafe_releases_before_the_watchdog_would_hold():
+    sup, t = following()
+    # the ground station stalled: its set-points are stale AND PX4 went to Land on its own
+    cmd = sup.step(obs(t + 2.0, FlightMode.LAND, failsafe=True))
+    assert cmd is None
+    assert sup.released and sup.released_reason is not None and "PX4 failsafe" in sup.released_reason
+    assert sup.watchdog_holds == 0 and sup.watchdog_landings == 0
 
 
 def test_no_offboard_start_while_the_link_is_lost():
@@ -218,3 +266,58 @@ def test_land_request_lands_a_vehicle_released_to_a_px4_failsafe():
     run(sup, t, t + 2.0, FlightMode.RETURN)
     sup.request_land()
     assert sup.step(obs(t + 2.0, FlightMode.RETURN)) is Command.LAND
+
+
+def test_offboard_read_before_skyring_asked_for_it_is_not_taken_as_engaged():
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    sup.step(obs(0.0, FlightMode.READY, armed=False, in_air=False))
+    run(sup, 0.05, 1.5, FlightMode.HOLD, setpoints=False)
+    assert sup.engagement is Engagement.ENGAGING
+    # a stale Offboard reading (e.g. from before a watchdog Hold) while pre-streaming: still engaging
+    run(sup, 1.5, 1.7, FlightMode.OFFBOARD)
+    assert sup.engagement is Engagement.ENGAGING
+
+
+def test_a_stall_of_the_whole_station_while_following_lands_the_vehicle_as_px4s_failsafe():
+    sup, t = following()
+    sup.note_setpoint(t + 6.0)  # the agent's first set-point after the stall came in before this step
+    cmd = sup.step(
+        Observation(now_s=t + 6.0, mode=FlightMode.OFFBOARD, armed=True, in_air=True, stalled_s=6.0)
+    )
+    assert cmd is Command.LAND
+    assert sup.engagement is Engagement.LANDING and sup.failsafe_landing and sup.stall_s == 6.0
+    assert sup.watchdog_landings == 0
+
+
+def test_a_short_gap_in_the_supervisor_is_no_stall():
+    sup, t = following()
+    sup.note_setpoint(t + 1.0)
+    cmd = sup.step(
+        Observation(now_s=t + 1.0, mode=FlightMode.OFFBOARD, armed=True, in_air=True, stalled_s=1.0)
+    )
+    assert cmd is None and sup.engagement is Engagement.FOLLOWING
+
+
+def test_a_failsafe_px4_reported_but_already_left_lands_the_vehicle():
+    sup, t = following()
+    sup.note_setpoint(t)
+    # PX4 landed it, then MAVSDK's stale set-point took it back to Offboard before skyring looked
+    cmd = sup.step(
+        Observation(now_s=t, mode=FlightMode.OFFBOARD, armed=True, in_air=True, failsafe_reported=True)
+    )
+    assert cmd is Command.LAND and sup.failsafe_landing
+    run(sup, t + 0.05, t + 3.0, FlightMode.LAND)
+    sup.step(obs(t + 3.0, FlightMode.READY, armed=False, in_air=False))
+    assert sup.engagement is Engagement.IDLE and not sup.failsafe_landing
+
+
+def test_a_failsafe_px4_still_runs_is_left_to_px4():
+    sup, t = following()
+    sup.note_setpoint(t)
+    cmd = sup.step(
+        Observation(
+            now_s=t, mode=FlightMode.LAND, armed=True, in_air=True, failsafe=True, failsafe_reported=True
+        )
+    )
+    assert cmd is None and sup.released and not sup.failsafe_landing

@@ -231,7 +231,7 @@ def test_at_the_failsafe_level_the_battery_failsafe_lands_the_vehicle_out_of_sky
     t, log = _run(ap, t, 3.0)
     s = ap.state()
     assert s.mode == FlightMode.LAND and s.released
-    assert s.failsafe == "battery 15 % at or below 15 %: landing"
+    assert s.failsafe and s.failsafe_reason == "battery 15 % at or below 15 %: landing"
     assert ap.failsafe_landings == 1
     ap.send_setpoint(
         Setpoint(stamp_s=t, position_m=np.array([0.0, 0.0, 9.0]), velocity_mps=np.zeros(3), yaw_rad=0.0)
@@ -239,7 +239,7 @@ def test_at_the_failsafe_level_the_battery_failsafe_lands_the_vehicle_out_of_sky
     assert ap.state().mode == FlightMode.LAND  # the failsafe has it: set-points are refused
     t, _ = _run(ap, t, 20.0)
     s = ap.state()
-    assert (s.in_air, s.armed, s.failsafe) == (False, False, "")
+    assert (s.in_air, s.armed, s.failsafe, s.failsafe_reason) == (False, False, False, None)
 
 
 def test_the_battery_failsafe_level_is_a_parameter():
@@ -253,10 +253,11 @@ def test_the_battery_failsafe_level_is_a_parameter():
     t, _ = _run(ap, 0.0, 12.0)
     ap.set_battery(0.31)
     _run(ap, t, 0.1)
-    assert ap.state().failsafe == ""
+    assert not ap.state().failsafe
     ap.set_battery(0.30)
     _run(ap, t + 0.1, 0.1)
-    assert ap.state().mode == FlightMode.LAND and "at or below 30 %" in ap.state().failsafe
+    s = ap.state()
+    assert s.mode == FlightMode.LAND and s.failsafe and "at or below 30 %" in (s.failsafe_reason or "")
 
 
 def test_arming_on_a_battery_at_the_failsafe_level_is_refused_with_the_reason():
@@ -266,11 +267,11 @@ def test_arming_on_a_battery_at_the_failsafe_level_is_refused_with_the_reason():
     _run(ap, 0.0, 1.0)
     s = ap.state()
     assert not s.armed and not s.in_air
-    assert s.arming_refused == "battery 12 % at or below the failsafe level 15 %"
+    assert s.arming_refusal == "battery 12 % at or below the failsafe level 15 %"
     ap.set_battery(0.9)  # a fresh battery
     ap.takeoff(8.9)
     _run(ap, 1.0, 1.0)
-    assert ap.state().armed and ap.state().arming_refused == ""
+    assert ap.state().armed and ap.state().arming_refusal is None
 
 
 def test_a_cut_link_freezes_telemetry_as_lost_and_drops_commands_until_restored():

@@ -1,0 +1,106 @@
+"""The pre-take-off checks at the operator's commands: the formation's start and Release are refused, naming
+the MAV, while one stands inside the person's keep-out or within d_min of a teammate; the override lets it go
+and is logged (server/station/ground_station.py, server/station/commands.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from test_api import assert_refused, client_for, run_until
+
+from server.flightlog.log import FlightLog
+from server.flightlog.records import LogHeader
+from server.station.ground_station import GroundStation
+from vehicles.mission import Phase
+from vehicles.sim.scenario import Scenario, build_sim
+
+RATE_HZ = 20.0
+
+
+def grounded_station(flight_log: FlightLog | None = None) -> GroundStation:
+    """Three simulated MAVs on the ground about the still person, formation stopped, d_des 10 m: the person's
+    keep-out (8.75 m) reaches the MAVs' start ring (about 8 m)."""
+    setup = build_sim(Scenario(vehicles=3, seed=3, person="still", trees="none"))
+    setup.mission.set_formation_enabled(False)
+    station = GroundStation(mission=setup.mission, control_period_s=1.0 / RATE_HZ)
+    if flight_log is not None:
+        station.attach_log(flight_log)
+    station.tick()
+    station.set_formation(d_des_m=10.0, h_des_m=8.0)
+    return station
+
+
+def distances_to_person(station: GroundStation) -> dict[int, float]:
+    snap = station.snapshot()
+    assert snap.person_truth is not None
+    person = snap.person_truth.position_m[:2]
+    return {
+        v.vehicle_id: float(np.hypot(*(v.autopilot.position_m[:2] - person)))
+        for v in snap.vehicles
+        if v.autopilot is not None
+    }
+
+
+async def test_start_is_refused_naming_each_mav_inside_the_keep_out_and_nothing_changes():
+    station = grounded_station()
+    inside = sorted(vid for vid, d in distances_to_person(station).items() if d < 8.75)
+    assert inside  # the set-up puts at least one there
+    await assert_refused(client_for(station), "POST", "/api/formation/start", match=f"MAV {inside[0]} stands")
+    assert not station.snapshot().formation_enabled
+
+
+async def test_the_view_says_why_each_waiting_mav_may_not_take_off_where_it_stands():
+    station = grounded_station()
+    vehicles = (await client_for(station).get("/api/state")).json()["vehicles"]
+    for v in vehicles:
+        d = distances_to_person(station)[v["vehicle_id"]]
+        assert (v["takeoff_check"] is not None) == (d < 8.75)
+        if v["takeoff_check"] is not None:
+            assert f"{d:.1f} m from the person, inside the 8.8 m keep-out" in v["takeoff_check"]
+
+
+async def test_the_override_starts_the_formation_and_the_flight_log_keeps_it(tmp_path):
+    header = LogHeader(
+        command="serve",
+        vehicles=3,
+        seed=3,
+        method="active",
+        trees="none",
+        person="still",
+        rate_hz=RATE_HZ,
+        speed=1.0,
+        sample_rate_hz=5.0,
+        started_utc="2026-01-01T00:00:00+00:00",
+    )
+    flight_log = FlightLog.create(tmp_path / "flight.jsonl", header=header)
+    station = grounded_station(flight_log)
+    client = client_for(station)
+    assert (await client.post("/api/formation/start")).status_code == 422
+    response = await client.post("/api/formation/start", params={"override": "true"})
+    assert response.status_code == 200, response.text
+    run_until(station, lambda snap: all(v.phase != Phase.IDLE for v in snap.vehicles), limit_s=2.0)
+    flight_log.close()
+    commands = [
+        record
+        for record in map(json.loads, (tmp_path / "flight.jsonl").read_text().splitlines())
+        if record["kind"] == "command" and record["name"] == "set_formation_enabled"
+    ]
+    assert [(c["accepted"], c["arguments"]["override"]) for c in commands] == [(False, False), (True, True)]
+    assert "keep-out" in commands[1]["result"]
+
+
+async def test_release_of_a_landed_mav_inside_the_keep_out_is_refused_until_overridden():
+    setup = build_sim(Scenario(vehicles=3, seed=3, person="still", trees="none"))
+    station = GroundStation(mission=setup.mission, control_period_s=1.0 / RATE_HZ)
+    run_until(station, lambda snap: all(v.phase == Phase.FORMATION for v in snap.vehicles), limit_s=30.0)
+    client = client_for(station)
+    await client.post("/api/vehicles/1/land")
+    run_until(station, lambda snap: snap.vehicles[0].phase == Phase.LANDED, limit_s=30.0)
+    # MAV 1 landed about 8 m from the person; at d_des 10 m the keep-out (8.75 m) covers it
+    assert (await client.put("/api/formation", json={"d_des_m": 10.0, "h_des_m": 8.0})).status_code == 200
+    assert distances_to_person(station)[1] < 8.75
+    await assert_refused(client, "POST", "/api/vehicles/1/release", match="MAV 1 stands")
+    response = await client.post("/api/vehicles/1/release", params={"override": "true"})
+    assert response.status_code == 200, response.text
+    assert response.json()["phase"] == "idle"
