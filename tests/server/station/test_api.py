@@ -387,7 +387,7 @@ async def test_releasing_a_flying_mav_is_refused_and_changes_nothing(flying):
         client_for(flying),
         "POST",
         "/api/vehicles/1/release",
-        match="only a landed vehicle, or an airborne one skyring does not fly, can be released",
+        match="only a landed or holding vehicle, or an airborne one skyring does not fly, can be released",
     )
 
 
