@@ -11,11 +11,13 @@ from typing import Any
 
 from pydantic import TypeAdapter
 
-from webui.view import ObstacleView, SceneView, VehicleView
+from webui.view import Alert, ObstacleView, SceneView, VehicleView
 
 SCENE = TypeAdapter(SceneView)
 VEHICLE = TypeAdapter(VehicleView)
 OBSTACLES = TypeAdapter(tuple[ObstacleView, ...])
+ALERT = TypeAdapter(Alert)
+ALERTS = TypeAdapter(tuple[Alert, ...])
 
 
 def scene_json(view: SceneView) -> bytes:

@@ -73,6 +73,10 @@ class LandAll(BaseModel):
     landing: list[int] = Field(description="the MAVs told to land")
 
 
+class Acknowledged(BaseModel):
+    acknowledged: int = Field(description="alerts newly acknowledged")
+
+
 Responses = dict[int | str, dict[str, Any]]
 """FastAPI's `responses=`: status -> OpenAPI response (model and description)."""
 

@@ -14,6 +14,7 @@ from pydantic import TypeAdapter
 from server.station.api.deps import Commander, json_response, station_of
 from server.station.api.models import (
     COMMON_REFUSALS,
+    Acknowledged,
     FormationRequest,
     LandAll,
     ObstacleRequest,
@@ -22,13 +23,15 @@ from server.station.api.models import (
 )
 from server.station.api.routes_state import FORMATION
 from webui.access import acting_as
-from webui.schema import VEHICLE
-from webui.view import FormationState, ObstacleView, VehicleView
+from webui.schema import ALERT, VEHICLE
+from webui.view import Alert, FormationState, ObstacleView, VehicleView
 
 OBSTACLE = TypeAdapter(ObstacleView)
 LAND_ALL = TypeAdapter(LandAll)
+ACKNOWLEDGED = TypeAdapter(Acknowledged)
 NOT_FOUND: Responses = {404: problem("no such vehicle or obstacle")}
 ObstacleId = Annotated[str, Path(min_length=1, max_length=64, description="e.g. v1")]
+AlertId = Annotated[str, Path(min_length=1, max_length=64, description="e.g. a3")]
 VehicleId = Annotated[int, Path(ge=0, le=1_000_000, description="1..K")]
 Override = Annotated[
     bool, Query(description="take off or join although the pre-take-off checks refuse a MAV (audited)")
@@ -111,13 +114,31 @@ def land(vehicle_id: VehicleId, request: Request, principal: Commander) -> Respo
 
 
 @router.post(
+    "/vehicles/{vehicle_id}/hold",
+    response_model=VehicleView,
+    responses={
+        404: problem("no such vehicle"),
+        422: problem(
+            "refused: a malformed request, or the MAV is not flying (on the ground, landing, or "
+            "holding already)"
+        ),
+    },
+    summary="Stop one flying MAV where it is (release gives it back to the formation)",
+)
+def hold(vehicle_id: VehicleId, request: Request, principal: Commander) -> Response:
+    with acting_as(principal):
+        station_of(request).hold(vehicle_id)
+    return _vehicle(request, vehicle_id, principal)
+
+
+@router.post(
     "/vehicles/{vehicle_id}/release",
     response_model=VehicleView,
     responses={
         **NOT_FOUND,
         422: problem(
-            "refused: a malformed request; the MAV is not landed (nor airborne and free), is in its "
-            "autopilot's failsafe, the formation has no room for it, or it stands inside the person's "
+            "refused: a malformed request; the MAV is not landed or holding (nor airborne and free), is in "
+            "its autopilot's failsafe, the formation has no room for it, or it stands inside the person's "
             "keep-out or within d_min of a teammate (repeat with override=true to release it anyway)"
         ),
     },
@@ -136,3 +157,23 @@ def land_all(request: Request, principal: Commander) -> Response:
     with acting_as(principal):
         landing = station_of(request).land_all()
     return json_response(LAND_ALL, LandAll(landing=landing), principal=principal)
+
+
+@router.post(
+    "/alerts/{alert_id}/acknowledge",
+    response_model=Alert,
+    responses={404: problem("no such alert")},
+    summary="Mark one alert as seen (it stays in the list)",
+)
+def acknowledge_alert(alert_id: AlertId, request: Request, principal: Commander) -> Response:
+    with acting_as(principal):
+        station_of(request).acknowledge_alert(alert_id)
+    alert = next(a for a in station_of(request).scene_view().alerts if a.alert_id == alert_id)
+    return json_response(ALERT, alert, principal=principal)
+
+
+@router.post("/alerts/acknowledge", response_model=Acknowledged, summary="Mark every alert as seen")
+def acknowledge_all_alerts(request: Request, principal: Commander) -> Response:
+    with acting_as(principal):
+        count = station_of(request).acknowledge_all_alerts()
+    return json_response(ACKNOWLEDGED, Acknowledged(acknowledged=count), principal=principal)

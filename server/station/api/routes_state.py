@@ -1,4 +1,5 @@
-"""Reading the state: everything the operator sees, the formation, the obstacles (any signed-in role)."""
+"""Reading the state: everything the operator sees, the formation, the obstacles, the alerts (any signed-in
+role)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ from pydantic import TypeAdapter
 
 from server.station.api.deps import Viewer, json_response, station_of
 from server.station.api.models import COMMON_REFUSALS
-from webui.schema import OBSTACLES, SCENE
-from webui.view import FormationState, ObstacleView, SceneView
+from webui.schema import ALERTS, OBSTACLES, SCENE
+from webui.view import Alert, FormationState, ObstacleView, SceneView
 
 FORMATION = TypeAdapter(FormationState)
 
@@ -29,3 +30,8 @@ def get_formation(request: Request, _: Viewer) -> Response:
 @router.get("/obstacles", response_model=list[ObstacleView], summary="Trees and virtual obstacles")
 def get_obstacles(request: Request, _: Viewer) -> Response:
     return json_response(OBSTACLES, station_of(request).scene_view().obstacles)
+
+
+@router.get("/alerts", response_model=list[Alert], summary="Every alert so far, most urgent first")
+def get_alerts(request: Request, _: Viewer) -> Response:
+    return json_response(ALERTS, station_of(request).scene_view().alerts)

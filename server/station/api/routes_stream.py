@@ -5,12 +5,13 @@ that falls behind skips frames (it always gets the newest); one whose send has n
 `SEND_TIMEOUT_S` (its socket buffer full) is dropped and counted, so nothing is buffered without bound.
 
 Commands: a text message `{"id": "...", "command": "land_all"}` (or set_formation with d_des_m and h_des_m,
-add_obstacle with x_m, y_m and radius_m, remove_obstacle with obstacle_id, land/release with vehicle_id,
-start_formation, stop_formation; release and start_formation take an optional `override`: true to take
-off although the pre-take-off checks refuse) is answered `{"reply_to": "...", "accepted": true|false,
-"detail": "...", "result": ...}`; it runs the same ground-station command on behalf of the signed-in
-operator and is audited (surface "ws") whether accepted or refused. The handshake is refused (HTTP 403)
-from a foreign origin and, when sign-in is required, without a session (cookie or bearer token).
+add_obstacle with x_m, y_m and radius_m, remove_obstacle with obstacle_id, land/hold/release with
+vehicle_id, start_formation, stop_formation, acknowledge_alert with alert_id, acknowledge_all_alerts; release
+and start_formation take an optional `override`: true to take off although the pre-take-off checks refuse)
+is answered `{"reply_to": "...", "accepted": true|false, "detail": "...", "result": ...}`; it runs the same
+ground-station command on behalf of the signed-in operator and is audited (surface "ws") whether accepted or
+refused. The handshake is refused (HTTP 403) from a foreign origin and, when sign-in is required, without a
+session (cookie or bearer token).
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ class RemoveObstacle(_Command):
 
 
 class Land(_Command):
-    command: Literal["land"]
+    command: Literal["land", "hold"]
     vehicle_id: int
 
 
@@ -75,10 +76,24 @@ class StartFormation(_Command):
 
 
 class TeamCommand(_Command):
-    command: Literal["land_all", "stop_formation"]
+    command: Literal["land_all", "stop_formation", "acknowledge_all_alerts"]
 
 
-AnyCommand = SetFormation | AddObstacle | RemoveObstacle | Land | Release | StartFormation | TeamCommand
+class AcknowledgeAlert(_Command):
+    command: Literal["acknowledge_alert"]
+    alert_id: str = Field(min_length=1, max_length=64)
+
+
+AnyCommand = (
+    SetFormation
+    | AddObstacle
+    | RemoveObstacle
+    | Land
+    | Release
+    | StartFormation
+    | TeamCommand
+    | AcknowledgeAlert
+)
 WsCommand = Annotated[AnyCommand, Field(discriminator="command")]
 WS_COMMAND = TypeAdapter(WsCommand)
 
@@ -130,13 +145,17 @@ def _run_command(station: GroundStation, command: AnyCommand) -> object:
     if isinstance(command, RemoveObstacle):
         return station.remove_obstacle(command.obstacle_id)
     if isinstance(command, Land):
-        return station.land(command.vehicle_id)
+        return (station.land if command.command == "land" else station.hold)(command.vehicle_id)
+    if isinstance(command, AcknowledgeAlert):
+        return station.acknowledge_alert(command.alert_id)
     if isinstance(command, Release):
         return station.release(command.vehicle_id, override=command.override)
     if isinstance(command, StartFormation):
         return station.set_formation_enabled(True, override=command.override)
     if command.command == "land_all":
         return station.land_all()
+    if command.command == "acknowledge_all_alerts":
+        return station.acknowledge_all_alerts()
     return station.set_formation_enabled(False)
 
 

@@ -71,7 +71,8 @@ def client_for(station: GroundStation) -> httpx.AsyncClient:
 
 
 def without_counters(state: dict) -> dict:
-    return {k: v for k, v in state.items() if k != "counters"}
+    """The state but for the counters and the view's wall time (utc_s moves on by itself)."""
+    return {k: v for k, v in state.items() if k not in ("counters", "utc_s")}
 
 
 async def assert_refused(
@@ -133,7 +134,8 @@ async def test_state_of_a_flying_team_has_plans_estimate_and_solver_times(flying
     for v in state["vehicles"]:
         assert v["in_air"] and v["mode"] == "offboard" and not v["link_stale"]
         assert len(v["plan_positions_m"]) == 17
-        assert v["solver_time_s"] > 0.0
+        # the solver's own time: 0 when the exact MPC's closed form solved the tick (no solver ran)
+        assert 0.0 <= v["solver_time_s"] < 0.05
     estimate = state["person_estimate"]
     assert np.array(estimate["cov"]).shape == (6, 6)
     assert estimate["position_m"] == pytest.approx(flying.scene_view().person_estimate.position_m)
@@ -415,7 +417,7 @@ async def test_releasing_a_flying_mav_is_refused_and_changes_nothing(flying):
         client_for(flying),
         "POST",
         "/api/vehicles/1/release",
-        match="only a landed vehicle, or an airborne one skyring does not fly, can be released",
+        match="only a landed or holding vehicle, or an airborne one skyring does not fly, can be released",
     )
 
 

@@ -19,6 +19,8 @@ from server.station.api.app import create_app
 from server.station.api.gate import SESSION_COOKIE, Gate
 from server.station.api.routes_stream import handle_command
 from server.station.api.users import Users, UsersError, hash_secret, user_line, verify_secret
+from server.station.ground_station import GroundStation
+from vehicles.sim.scenario import Scenario, build_sim
 from webui.access import Principal, Role, Surface
 
 OPERATOR, OBSERVER = ("alice", "alice-secret-1"), ("bob", "bob-secret-22")
@@ -33,6 +35,9 @@ MUTATING = [
     ("POST", "/api/vehicles/1/release", None),
     ("POST", "/api/vehicles/1/release?override=true", None),
     ("POST", "/api/land_all", None),
+    ("POST", "/api/vehicles/1/hold", None),
+    ("POST", "/api/alerts/a1/acknowledge", None),
+    ("POST", "/api/alerts/acknowledge", None),
 ]
 
 
@@ -49,9 +54,13 @@ def users() -> Users:
 
 @pytest.fixture
 def station():
-    s = make_station()
+    """Three simulated MAVs a second into their take-off; MAV 1 at 20 % battery: alert a1, unacknowledged."""
+    setup = build_sim(Scenario(vehicles=3, seed=3))
+    s = GroundStation(mission=setup.mission, control_period_s=1.0 / RATE_HZ)
+    setup.autopilots[0].set_battery(0.20)
     for _ in range(round(RATE_HZ)):
         s.tick()
+    assert [(a.alert_id, a.kind, a.acknowledged) for a in s.alerts] == [("a1", "battery", False)]
     return s
 
 
@@ -77,6 +86,7 @@ def digest(station) -> tuple:
         snap.formation_enabled,
         tuple(o.obstacle_id for o in snap.obstacles),
         tuple(v.phase for v in snap.vehicles),
+        tuple((a.alert_id, a.acknowledged) for a in station.alerts),
     )
 
 
@@ -244,6 +254,23 @@ def test_a_websocket_override_that_is_not_a_boolean_is_refused_as_malformed(stat
     assert not reply["accepted"] and "override" in reply["detail"]
     assert digest(station) == before
     assert (station.recent_audit[-1].command, station.recent_audit[-1].accepted) == ("release", False)
+
+
+async def test_an_operator_acknowledges_an_alert_and_holds_a_mav_and_the_audit_names_them(station, users):
+    c = client(station, users)
+    headers = {"authorization": f"Bearer {await sign_in(c, *OPERATOR)}"}
+    response = await c.post("/api/alerts/a1/acknowledge", headers=headers)
+    assert response.status_code == 200 and response.json()["acknowledged"] is True
+    assert [(a.alert_id, a.acknowledged) for a in station.alerts] == [("a1", True)]
+    for _ in range(round(3 * RATE_HZ)):  # airborne, then Hold stops it where it is
+        station.tick()
+    response = await c.post("/api/vehicles/2/hold", headers=headers)
+    assert response.status_code == 200 and response.json()["phase"] == "holding"
+    records = [(r.command, r.arguments, r.operator, r.surface, r.accepted) for r in station.recent_audit]
+    assert records[-2:] == [
+        ("acknowledge_alert", {"alert_id": "a1"}, "alice", "api", True),
+        ("hold", {"vehicle_id": 2}, "alice", "api", True),
+    ]
 
 
 async def test_signing_out_ends_the_session(station, users):
