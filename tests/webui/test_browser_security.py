@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import http.server
 import json
-import re
 import threading
 import time
 from collections.abc import Iterator
@@ -19,7 +18,7 @@ from contextlib import contextmanager
 
 import pytest
 import viser
-from live_harness import OBSERVER, OPERATOR, Live, close_page, new_page, sign_in
+from live_harness import OBSERVER, OPERATOR, Live, close_page, new_page, open_tab, sign_in
 from playwright.sync_api import expect
 
 from vehicles.mission import Phase
@@ -103,6 +102,7 @@ def test_the_operator_page_controls_work_only_while_signed_in(secured_live, brow
         assert stream["opened"] and stream["messages"] > 0
 
         assert page.request.post(f"{live.urls.api}auth/logout").status == 204  # as from another tab
+        open_tab(page, "Formation")
         page.get_by_text("Stop formation (hold)", exact=True).click()  # the page is still open
         expect(page.get_by_text("sign in as an operator", exact=False)).to_be_visible()
         assert digest(live) == before
@@ -130,12 +130,14 @@ def test_an_observer_watches_the_team_but_land_all_is_refused(secured_live, brow
     opened = sign_in(browser, live.urls.api, OBSERVER, ui=live.ui)
     try:
         frame = opened.operator
-        expect(frame.locator("strong", has_text=re.compile(r"^MAV \d$"))).to_have_count(3)  # watching works
+        open_tab(frame, "Team")
+        expect(frame.locator("tr[data-vehicle]")).to_have_count(3)  # watching works: a row per MAV
         assert opened.page.request.get(f"{live.urls.api}api/state").status == 200
         before, start = digest(live), len(live.station.recent_audit)
         frame.get_by_text("LAND ALL", exact=True).click()
         expect(frame.get_by_text("only an operator may command", exact=False)).to_be_visible()
         expect(frame.get_by_role("button", name="Confirm LAND ALL")).to_have_count(0)
+        open_tab(frame, "Formation")
         frame.get_by_text("Stop formation (hold)", exact=True).click()
         deadline = time.monotonic() + 20.0
         while len(audit_since(live, start)) < 2:  # the click reached the station and was refused
