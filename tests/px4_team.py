@@ -93,6 +93,7 @@ class VehicleTruth:
     mode: str = "UNKNOWN"
     armed: bool = False
     failsafe: bool = False
+    system_status: str = "UNKNOWN"  # PX4's heartbeat: STANDBY (can arm), UNINIT (cannot), ACTIVE, CRITICAL
     texts: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -246,6 +247,9 @@ class _GcsListener:
                 t.mode = _PX4_MODES.get((main, sub if main == 4 else 0), f"{main}/{sub}")
                 t.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 t.failsafe = t.armed and msg.system_status == mavlink.MAV_STATE_CRITICAL
+                t.system_status = mavlink.enums["MAV_STATE"][msg.system_status].name.removeprefix(
+                    "MAV_STATE_"
+                )
             elif kind == "GLOBAL_POSITION_INT":
                 point = GeodeticPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
                 t.enu_m = geodetic_to_enu(point, reference=REF)
@@ -256,7 +260,12 @@ class _GcsListener:
         with self._lock:
             t = self.truth
             return VehicleTruth(
-                enu_m=t.enu_m.copy(), mode=t.mode, armed=t.armed, failsafe=t.failsafe, texts=list(t.texts)
+                enu_m=t.enu_m.copy(),
+                mode=t.mode,
+                armed=t.armed,
+                failsafe=t.failsafe,
+                system_status=t.system_status,
+                texts=list(t.texts),
             )
 
     def close(self) -> None:
@@ -516,12 +525,44 @@ class Sampler:
         self._thread.join(timeout=2.0)
 
 
-def wait_for(condition: Callable[[], bool], *, timeout_s: float, what: str, every_s: float = 0.2) -> float:
-    """Poll until condition() holds; seconds it took, or AssertionError naming what did not happen."""
+def wait_for(
+    condition: Callable[[], bool],
+    *,
+    timeout_s: float,
+    what: str,
+    every_s: float = 0.2,
+    detail: Callable[[], str] | None = None,
+) -> float:
+    """Poll until condition() holds; seconds it took, or AssertionError naming what did not happen (and
+    detail(), e.g. what the station and PX4 showed then)."""
     t0 = time.monotonic()
     while True:
         if condition():
             return time.monotonic() - t0
         if time.monotonic() - t0 > timeout_s:
-            raise AssertionError(f"{what} did not happen within {timeout_s:.0f} s")
+            shown = f"\n{detail()}" if detail is not None else ""
+            raise AssertionError(f"{what} did not happen within {timeout_s:.0f} s{shown}")
         time.sleep(every_s)
+
+
+def describe(team: Team, station: Station | None = None) -> str:
+    """What PX4 and (if given) the station show for each vehicle: for a failing scenario's message."""
+    lines = []
+    truth = team.truth()
+    vehicles = []
+    if station is not None and station.proc.poll() is None:
+        with contextlib.suppress(httpx.HTTPError):
+            vehicles = station.state()["vehicles"]
+    for i, t in enumerate(truth):
+        line = (
+            f"MAV {i + 1}: PX4 {t.mode} armed={t.armed} status={t.system_status} "
+            f"height={t.enu_m[2]:.1f} m; last said: {[text for _, text in t.texts[-3:]]}"
+        )
+        if i < len(vehicles):
+            v = vehicles[i]
+            line += (
+                f"; view: phase={v['phase']} mode={v['autopilot_mode']} can_arm={v['can_arm']} "
+                f"in_formation={v['in_formation']} failsafe={v['failsafe']} refusal={v['arming_refusal']!r}"
+            )
+        lines.append(line)
+    return "\n".join(lines)

@@ -14,6 +14,7 @@ import json
 import math
 import os
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from px4_team import (
     SitlTeam,
     Station,
     Team,
+    describe,
     home_at,
     ring_homes,
     wait_for,
@@ -102,11 +104,15 @@ def view_in_formation(station: Station, ids=(1, 2, 3)) -> bool:
 def fly_formation(team: Team, station: Station, times: dict[str, float]) -> None:
     """Start the station, wait for take-off and the 2 pi / 3 formation; record connect/take-off/formation."""
     times["connect_s"] = station.wait_ready(60.0)
-    times["takeoff_s"] = wait_for(lambda: all(team.airborne()), timeout_s=60.0, what="all three airborne")
+    shown = partial(describe, team, station)  # what a failure message shows
+    times["takeoff_s"] = wait_for(
+        lambda: all(team.airborne()), timeout_s=60.0, what="all three airborne", detail=shown
+    )
     times["formation_s"] = times["takeoff_s"] + wait_for(
         lambda: flies_formation(team) and view_in_formation(station),
         timeout_s=90.0,
         what="the 2 pi / 3 formation",
+        detail=shown,
     )
 
 
@@ -133,11 +139,15 @@ def test_after_land_all_every_released_mav_is_airborne_and_in_formation_within_6
     for vid in (1, 2, 3):
         response = station.post(f"/api/vehicles/{vid}/release")
         assert response.status_code == 200, response.text
-    times["retakeoff_s"] = wait_for(lambda: all(team.airborne()), timeout_s=60.0, what="re-takeoff")
+    shown = partial(describe, team, station)  # what a failure message shows
+    times["retakeoff_s"] = wait_for(
+        lambda: all(team.airborne()), timeout_s=60.0, what="re-takeoff", detail=shown
+    )
     wait_for(
         lambda: flies_formation(team) and view_in_formation(station),
         timeout_s=60.0 - (time.monotonic() - released),
         what="the formation again within 60 s of the release",
+        detail=shown,
     )
     times["release_to_formation_s"] = time.monotonic() - released
     sampler.close()
@@ -160,9 +170,13 @@ def test_a_second_station_adopts_landed_vehicles_within_30_s_and_flies_the_forma
         timeout_s=5.0,
         what="the view showing PX4's modes",
     )
-    times["takeoff_s"] = wait_for(lambda: all(team.airborne()), timeout_s=60.0, what="take-off")
+    shown = partial(describe, team, second)  # what a failure message shows
+    times["takeoff_s"] = wait_for(lambda: all(team.airborne()), timeout_s=60.0, what="take-off", detail=shown)
     times["formation_s"] = times["takeoff_s"] + wait_for(
-        lambda: flies_formation(team) and view_in_formation(second), timeout_s=90.0, what="the formation"
+        lambda: flies_formation(team) and view_in_formation(second),
+        timeout_s=90.0,
+        what="the formation",
+        detail=shown,
     )
     report(team.kind, "second station, landed team", times)
 
@@ -191,7 +205,10 @@ def test_a_second_station_adopts_vehicles_still_flying_after_the_first_was_kille
     assert response.status_code == 200, response.text
     started = time.monotonic()
     wait_for(
-        lambda: flies_formation(team) and view_in_formation(second), timeout_s=120.0, what="the formation"
+        lambda: flies_formation(team) and view_in_formation(second),
+        timeout_s=120.0,
+        what="the formation",
+        detail=lambda: describe(team, second),
     )
     times["start_to_formation_s"] = time.monotonic() - started
     sampler.close()
@@ -264,6 +281,7 @@ def test_a_vehicle_refused_arming_shows_px4s_reason_within_2_s_and_its_teammates
         lambda: flies_formation(team, ids=(1, 2)) and view_in_formation(station, ids=(1, 2)),
         timeout_s=90.0,
         what="MAVs 1 and 2 at pi apart",
+        detail=lambda: describe(team, station),
     )
     assert not team.airborne()[2] and not station.state()["vehicles"][2]["in_formation"]
     refusals = sum("Arming denied" in text for _, text in team.truth()[2].texts)
@@ -290,7 +308,12 @@ def test_a_vehicle_inside_the_person_keep_out_is_refused_by_name_until_overridde
     assert not any(t.armed for t in team.truth())
     response = station.post("/api/formation/start", override="true")
     assert response.status_code == 200, response.text
-    wait_for(lambda: all(team.airborne()), timeout_s=60.0, what="take-off after the override")
+    wait_for(
+        lambda: all(team.airborne()),
+        timeout_s=60.0,
+        what="take-off after the override",
+        detail=lambda: describe(team, station),
+    )
     station.stop()
     commands = [
         record
