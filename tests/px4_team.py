@@ -178,17 +178,26 @@ _LINE_BUFFERED = ["stdbuf", "-oL", "-eL"] if shutil.which("stdbuf") else []
 
 
 def _instance_free(instance: int) -> bool:
-    """No PX4 holds instance's lock file (/tmp/px4_lock-N, locked by a running PX4 server)."""
-    path = Path(f"/tmp/px4_lock-{instance}")
-    if not path.exists():
-        return not Path(f"/tmp/px4-sock-{instance}").exists()
-    try:
-        with open(path, "a") as f:
-            fcntl.lockf(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            fcntl.lockf(f, fcntl.LOCK_UN)
+    """No PX4 runs as `instance`: none holds its lock file (/tmp/px4_lock-N, locked while a PX4 server runs,
+    removed when it exits) and nothing answers on its shell socket (/tmp/px4-sock-N; PX4 leaves it behind
+    when killed, and a new server replaces it)."""
+    lock = Path(f"/tmp/px4_lock-{instance}")
+    if lock.exists():
+        try:
+            with open(lock, "a") as f:
+                fcntl.lockf(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.lockf(f, fcntl.LOCK_UN)
+        except OSError:
+            return False
+    sock = Path(f"/tmp/px4-sock-{instance}")
+    if not sock.exists():
         return True
-    except OSError:
-        return False
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        try:
+            s.connect(str(sock))
+        except OSError:
+            return True  # a stale socket: nobody listens
+    return False
 
 
 class _GcsListener:
@@ -300,6 +309,10 @@ class SitlTeam(Team):
         self.logs: list[Path] = []
         try:
             instances = [i for i in range(20, 200) if _instance_free(i)][: len(homes)]
+            if len(instances) < len(homes):
+                raise RuntimeError(
+                    f"only {len(instances)} free PX4 instance numbers in 20..199 for {len(homes)}"
+                )
             for n, (instance, home) in enumerate(zip(instances, homes, strict=False)):
                 self._start(n, instance, home, etc, {**(params or {}), **(per_vehicle or {}).get(n + 1, {})})
             self._wait_ready(ready_timeout_s)
