@@ -123,7 +123,7 @@ def fly_formation(team: Team, station: Station, times: dict[str, float]) -> None
 
 
 def report(kind: str, name: str, times: dict[str, float]) -> None:
-    print(f"{kind} {name}: " + ", ".join(f"{k} {v:.1f}" for k, v in times.items()))
+    print(f"{kind} {name}: " + ", ".join(f"{k} {v:.2f}" for k, v in times.items()))
 
 
 def test_after_land_all_every_released_mav_is_airborne_and_in_formation_within_60_s(make_team, stations):
@@ -158,7 +158,7 @@ def test_after_land_all_every_released_mav_is_airborne_and_in_formation_within_6
     times["release_to_formation_s"] = time.monotonic() - released
     sampler.close()
     assert sampler.closest_m >= MIN_SEPARATION_M, sampler.closest_at
-    report(team.kind, "land all, release", times)
+    report(team.kind, "land all, release", {**times, "closest_pair_m": sampler.closest_m})
 
 
 def test_a_second_station_adopts_landed_vehicles_and_flies_the_formation(make_team, stations):
@@ -219,6 +219,8 @@ def test_a_second_station_adopts_vehicles_still_flying_after_the_first_was_kille
     times["start_to_formation_s"] = time.monotonic() - started
     sampler.close()
     assert sampler.closest_m >= MIN_SEPARATION_M, sampler.closest_at
+    times["adopted_flying"] = len(flying)
+    times["closest_pair_m"] = sampler.closest_m
     report(team.kind, "second station, team killed in flight", times)
 
 
@@ -256,7 +258,15 @@ def test_a_stalled_station_shows_px4s_failsafe_and_no_vehicle_in_formation_while
         assert all(v["failsafe_reason"] for v in landing if v["failsafe"])
         assert any(v["phase"] == "landing" and v["autopilot_mode"] == "LAND" for v in landing)
     assert sampler.closest_m >= MIN_SEPARATION_M, sampler.closest_at
-    report(team.kind, "stall 6 s", {"landed_after_thaw_s": seen[-1][0] - frozen - 6.0})
+    report(
+        team.kind,
+        "stall 6 s",
+        {
+            "landed_by_px4": len(down),
+            "landed_after_thaw_s": seen[-1][0] - frozen - 6.0,
+            "closest_pair_m": sampler.closest_m,
+        },
+    )
 
 
 def test_a_vehicle_refused_arming_shows_px4s_reason_within_2_s_and_its_teammates_space_for_two(
