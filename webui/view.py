@@ -47,10 +47,10 @@ class VehicleView:
     phase: the mission's phase name (e.g. "formation", "holding", "landing", "landed"); mode: the autopilot
     flight mode name; link_age_s: seconds since its last telemetry (stale when `link_stale`); solver_time_s:
     the MPC solver's own time of the last solve (0 when the closed form solved it; None before the first);
-    battery_fraction in [0, 1] or None when unknown; in_formation: flown by formation control in the roster now; distance_to_person_m: horizontal distance to
-    the fused person estimate (None without one); released: the autopilot or a pilot took it out of skyring's
-    control; fault: the controller's last fault line ("" when none); agent: its onboard agent's link (None
-    when the agent runs in the station).
+    battery_fraction in [0, 1] or None when unknown; in_formation: flown by formation control in the roster
+    now; distance_to_person_m: horizontal distance to the fused person estimate (None without one); released:
+    the autopilot or a pilot took it out of skyring's control; fault: the controller's last fault line (""
+    when none); agent: its onboard agent's link (None when the agent runs in the station).
 
     What the autopilot itself says (the truth when it differs from skyring's reading): autopilot_mode: its own
     mode name (PX4: "OFFBOARD", "LAND", "HOLD", "RETURN_TO_LAUNCH", ...; "" when the back-end has none);
