@@ -11,7 +11,7 @@ POSE_REQS := vehicles/detect/pose-requirements.txt
 POSE_PYTHON ?= $(shell for p in python3.12 python3.11; do command -v $$p >/dev/null 2>&1 && $$p -c 'import venv' 2>/dev/null && { echo $$p; break; }; done)
 FOOTAGE := /usr/share/doc/opencv-doc/examples/data/vtest.avi
 
-.PHONY: run test test-px4 check bench lint chromium footage pose-env clean
+.PHONY: run test test-px4 check bench lint chromium footage pose-env clean kernels
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -39,7 +39,12 @@ chromium:
 run: $(STAMP)
 	$(VENV)/bin/skyring serve
 
-test: $(STAMP) chromium footage $(POSE_STAMP)
+# The controller's numba kernels are compiled (first run after an install) or loaded once before the tests,
+# so that no timed test pays for the compile (docs/fast-core.md).
+kernels: $(STAMP)
+	$(PY) -c "from controller.warmup import warm_up; warm_up()"
+
+test: $(STAMP) chromium footage $(POSE_STAMP) kernels
 	$(PY) -m pytest -q -ra -n auto --durations=15 -m "not px4_sitl"
 
 # The PX4 scenarios against real PX4 SITL (SIH): PX4_SITL=path/to/build/px4_sitl_default/bin/px4 (docs/px4.md
@@ -54,7 +59,7 @@ test-px4: $(STAMP)
 	PX4_SITL="$(abspath $(PX4_SITL))" $(PY) -m pytest -q -rP -p no:xdist -m px4_sitl --durations=0 tests/vehicles/px4
 
 # The fast part: no closed-loop runs, browser or end-to-end tests (they run in `make test` and CI).
-check: $(STAMP) footage $(POSE_STAMP)
+check: $(STAMP) footage $(POSE_STAMP) kernels
 	$(PY) -m pytest -q -ra -n auto -m "not slow and not browser and not e2e"
 
 bench: $(STAMP)

@@ -31,11 +31,9 @@ from controller.fields import (
     ObstacleSet,
     TeammatePaths,
     covariance_radius_m,
-    external_inputs,
-    plan_path,
-    plan_velocities,
     teammate_paths,
 )
+from controller.fields_kernel import external_inputs_compiled
 from controller.messages import (
     ControlOutput,
     HorizonPlan,
@@ -50,10 +48,10 @@ from controller.reference import (
     bearing_rad,
     clip_into,
     initial_state,
-    input_displacement,
     plan_state_at,
     terminal_reference,
 )
+from controller.teammates import TeammateView, align_rows
 
 DEFAULT_COV_M2 = np.eye(3) * 0.25
 
@@ -96,8 +94,8 @@ def _finite(*arrays) -> bool:
 
 
 def _sane(*arrays) -> bool:
-    """Finite and within SANE_ABS (a NaN fails the comparison)."""
-    return all(float(np.abs(a).max()) < SANE_ABS for a in arrays)
+    """Finite and within SANE_ABS (a NaN fails the comparison). On plain floats: these are (3,) vectors."""
+    return all(abs(v) < SANE_ABS for a in arrays for v in np.asarray(a).ravel().tolist())
 
 
 class FormationController:
@@ -126,6 +124,12 @@ class FormationController:
         self._obstacle_dropped = 0
         self._cov_key: bytes | None = None
         self._cov_radius = 0.0
+        dt = mpc_params.dt_s
+        self._step_times = dt * np.arange(self._steps)[:, None]  # (N+1, 1) n dt
+        # input_displacement's weights dt^2 (N - n + 1/2), computed once
+        self._displacement_weights = dt * dt * (self._steps - 1 - np.arange(self._steps) + 0.5)
+        self._prev_rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._two_rows = np.arange(2)
         self.reset()
 
     @property
@@ -154,7 +158,7 @@ class FormationController:
         now_s: float,
         own: VehicleState,
         person: PersonEstimate | None,
-        teammates: Sequence[HorizonPlan],
+        teammates: Sequence[HorizonPlan] | TeammateView,
         obstacles: Sequence[Obstacle],
         formation: FormationParams,
         in_formation: bool = True,
@@ -162,7 +166,8 @@ class FormationController:
     ) -> ControlOutput:
         """Plan one control tick at now_s (s, the caller's clock); return the plan and the way-point.
 
-        teammates: the latest plan of each teammate (any age; in_formation ones count for K and the spacing);
+        teammates: the latest plan of each teammate (any age; in_formation ones count for K and the
+        spacing), or a view of a `TeammateTable` (plans checked on arrival, kept in arrays: teammates.py);
         obstacles: trees and virtual obstacles; formation: the operator's d_des / h_des; in_formation: False
         for a MAV that left formation control (its plan says so; it neither spaces itself nor steers its
         approach angle); preferred_bearing_rad: when given, the terminal reference lies at this ENU bearing
@@ -293,9 +298,22 @@ class FormationController:
             return self._last_position.copy(), np.zeros(3)
         return clip_into(np.zeros(3), lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
 
-    def _teammates(self, teammates: Sequence[HorizonPlan], now_s: float, own: VehicleState) -> TeammatePaths:
+    def _teammates(
+        self, teammates: Sequence[HorizonPlan] | TeammateView, now_s: float, own: VehicleState
+    ) -> TeammatePaths:
         """Teammates' plans on our horizon. Plans carrying our id, a non-finite stamp or step, or non-finite
-        numbers are dropped and counted."""
+        numbers are dropped and counted (a table refused those on arrival)."""
+        if isinstance(teammates, TeammateView):
+            mates = teammates.paths(
+                now_s=now_s,
+                dt_s=self._mpc_params.dt_s,
+                steps=self._steps,
+                own_cov_radius_m=self._own_cov_radius(own),
+                params=self._params.fields,
+                current_position_only=self._method == Method.PRICE,
+            )
+            self._counts["rejected_plans"] += mates.rejected
+            return mates
         usable = [
             p
             for p in teammates
@@ -345,11 +363,9 @@ class FormationController:
     ) -> np.ndarray:
         """(N+1, 3) clamped external inputs on the previous plan, moved to begin at the start state."""
         prm = self._params
-        dt = self._mpc_params.dt_s
         if self._prev_plan is not None:
-            own_path = plan_path(self._prev_plan, now_s=tick.now_s, dt_s=dt, steps=self._steps)
+            own_path, own_vel = self._previous_plan_on_horizon(tick.now_s)
             own_path = own_path + (tick.start_p - own_path[0])
-            own_vel = plan_velocities(self._prev_plan, now_s=tick.now_s, dt_s=dt, steps=self._steps)
         else:
             own_path = np.repeat(tick.start_p[None, :], self._steps, axis=0)
             own_vel = np.repeat(tick.start_v[None, :], self._steps, axis=0)
@@ -359,8 +375,8 @@ class FormationController:
         person_p = np.asarray(person.position_m, dtype=float)
         if prm.reference.predict_person:
             person_v = np.asarray(person.velocity_mps, dtype=float)
-            person_p = person_p + person_v * (dt * np.arange(self._steps)[:, None])
-        ext = external_inputs(
+            person_p = person_p + person_v * self._step_times
+        ext = external_inputs_compiled(
             own_positions_m=own_path,
             person_position_m=person_p,
             teammates=mates,
@@ -376,6 +392,26 @@ class FormationController:
         if ext.fault:
             self._counts["field_faults"] += 1
         return ext.total
+
+    def _previous_plan_on_horizon(self, now_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """The previous plan's positions and velocities (N+1, 3) at now_s + n dt (fields.plan_path and
+        plan_velocities, in one compiled call)."""
+        plan = self._prev_plan
+        assert plan is not None
+        if self._prev_rows is None or self._prev_rows[0] is not plan.positions_m:
+            self._prev_rows = (
+                plan.positions_m,
+                np.stack([plan.positions_m, plan.velocities_mps]),
+                np.full(2, len(plan.positions_m), dtype=np.int64),
+                np.full(2, plan.stamp_s),
+                np.full(2, plan.dt_s),
+            )
+        _, both, lengths, stamps, dts = self._prev_rows
+        out = np.empty((2, self._steps, 3))
+        align_rows(
+            both, lengths, stamps, dts, self._two_rows, float(now_s), self._mpc_params.dt_s, False, out
+        )
+        return out[0], out[1]
 
     def _target(
         self,
@@ -405,7 +441,8 @@ class FormationController:
             preferred_bearing_rad=preferred_bearing_rad,
         )
         if ref.pass_through and not price:
-            shift_p, shift_v = input_displacement(f_total, dt_s=mp.dt_s)
+            # reference.input_displacement with its weights computed once
+            shift_p, shift_v = self._displacement_weights @ f_total, mp.dt_s * f_total.sum(axis=0)
             target, target_v = target + shift_p, target_v + shift_v
         return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), target_v
 

@@ -17,11 +17,27 @@ import numpy as np
 
 
 def frozen_array(value, shape: tuple[int, ...], name: str) -> np.ndarray:
-    """Return `value` as a read-only float64 array of `shape` (-1 = any length), or raise ValueError."""
-    arr = np.array(value, dtype=float)
-    if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape, strict=True)):
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
-    arr.setflags(write=False)
+    """Return `value` as a read-only float64 array of `shape` (-1 = any length), or raise ValueError.
+
+    A float64 array that is read-only already and owns its data is taken as it is (nobody holds a writable
+    view of it): the controller hands over the arrays it has just computed this way, without a copy.
+    """
+    if (
+        type(value) is np.ndarray
+        and value.dtype == np.float64
+        and not value.flags.writeable
+        and value.base is None
+    ):
+        arr = value
+    else:
+        arr = np.array(value, dtype=float)
+    got = arr.shape
+    if got != shape and (
+        len(got) != len(shape) or any(s not in (-1, a) for s, a in zip(shape, got, strict=True))
+    ):
+        raise ValueError(f"{name} must have shape {shape}, got {got}")
+    if arr is not value:
+        arr.setflags(write=False)
     return arr
 
 

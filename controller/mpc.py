@@ -19,6 +19,11 @@ x(1..N+1) = h + G u, with h the free response to x(0) and f + g (`predict` with 
 reliably on it (docs/method.md#condensed-form). State bounds are soft, with one slack per state component
 shared over the horizon and an exact penalty, because a strong external input can make them infeasible
 (docs/method.md#soft-state-bounds, docs/method.md#infeasible-qps).
+
+Solvers (MpcParams.solver): "exact" (the default) is controller/qp.py: the unconstrained optimum in closed
+form whenever it provably solves the QP (almost every tick of a formation flight), otherwise the exact answer
+of a dense active-set solver (DAQP), warm-started. "osqp" is the OSQP set-up, kept as the reference the exact
+path is tested against (docs/fast-core.md has the measurements).
 """
 
 from __future__ import annotations
@@ -29,7 +34,11 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from controller.mpc_kernels import CLOSED_FORM, INVALID, NEEDS_SOLVER, rollout, solve_fast
+from controller.qp import ExactQp
+
 EFFORT_MODES = ("hover", "planned", "raw")
+SOLVERS = ("exact", "osqp")
 ACCEPTED_STATUSES = ("solved", "solved inaccurate")
 # Any argument beyond this (m, m/s, m/s^2, or weight) is rejected: it is far outside any flight, and the
 # solver's data would leave OSQP's range (it takes 1e30 as infinity and silently ignores invalid updates).
@@ -48,12 +57,17 @@ class MpcParams:
     slack_weight: linear penalty per m (or m/s) of the largest violation of each state component's bounds;
     slack_quadratic_weight: its quadratic companion (per m^2), there for the solver's convergence.
 
-    Solver: eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its iteration cap, polishing
-    its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate" (the iteration cap was hit
-    with the residuals within OSQP's loosened tolerances) as ok: the plan is re-rolled through the exact
-    dynamics with inputs clipped into their box, so it is consistent and admissible, only less optimal, which
-    beats braking. Every other status (infeasible, cap hit far from a solution, non-convex) is a failure.
+    solver: "exact" (closed form when provably optimal, else DAQP; controller/qp.py) or "osqp" (the
+    reference). eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its (and DAQP's)
+    iteration cap, polishing its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate"
+    (the iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the plan is
+    re-rolled through the exact dynamics with inputs clipped into their box, so it is consistent and
+    admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
+    solution, non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
+    half_plane_weight, half_plane_quadratic_weight: the exact (L-infinity) penalty per m of the largest
+    violation of the soft half-planes a solve may be given (`HalfPlanes`), and its quadratic companion; far
+    above slack_weight, so a half-plane gives way only when it cannot hold.
     """
 
     horizon_steps: int = 15
@@ -69,6 +83,7 @@ class MpcParams:
     terminal_position_weight: float = 100.0
     terminal_velocity_weight: float = 100.0
     effort: str = "hover"
+    solver: str = "exact"
     slack_weight: float = 1.0e4
     slack_quadratic_weight: float = 5.0e3
     eps_abs: float = 1.0e-5
@@ -77,6 +92,8 @@ class MpcParams:
     polishing: bool = True
     accept_inaccurate: bool = True
     violation_tolerance: float = 1.0e-4
+    half_plane_weight: float = 1.0e5
+    half_plane_quadratic_weight: float = 1.0e3
 
     def __post_init__(self) -> None:
         if self.horizon_steps < 1:
@@ -85,6 +102,8 @@ class MpcParams:
             raise ValueError(f"dt_s must be a positive number of seconds, got {self.dt_s}")
         if self.effort not in EFFORT_MODES:
             raise ValueError(f"effort must be one of {EFFORT_MODES}, got {self.effort!r}")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
         for name, lo, hi in (
             ("position", self.position_min_m, self.position_max_m),
             ("velocity", self.velocity_min_mps, self.velocity_max_mps),
@@ -102,6 +121,12 @@ class MpcParams:
                 raise ValueError(f"{name} must be a finite number >= 0, got {getattr(self, name)}")
         if not (np.isfinite(self.slack_weight) and self.slack_weight > 0):
             raise ValueError(f"slack_weight must be positive, got {self.slack_weight}")
+        if not (np.isfinite(self.half_plane_weight) and self.half_plane_weight > 0):
+            raise ValueError(f"half_plane_weight must be positive, got {self.half_plane_weight}")
+        if not (np.isfinite(self.half_plane_quadratic_weight) and self.half_plane_quadratic_weight > 0):
+            raise ValueError(
+                f"half_plane_quadratic_weight must be > 0, got {self.half_plane_quadratic_weight}"
+            )
 
     @property
     def gravity_vector_mps2(self) -> np.ndarray:
@@ -110,18 +135,52 @@ class MpcParams:
 
 
 @dataclass(frozen=True, eq=False)
+class HalfPlanes:
+    """Linear constraints on the plan's positions, one per row r:
+    normals_xy[r] . p(steps[r])[:2] + normals_z[r] * p(steps[r])[2] >= offsets[r], with steps (R,) int in
+    1..N+1, normals_xy (R, 2), normals_z (R,) or None (= 0: a vertical plane, the usual case), offsets (R,) m.
+    A generic hook for constraints built outside the MPC (e.g. separation half-planes); they enter the QP as
+    extra rows on the condensed inputs (docs/fast-core.md#extra-constraints-half-planes).
+
+    soft: (R,) bool, None = every row soft. Soft rows share one slack w >= 0 with an exact penalty
+    (MpcParams.half_plane_weight): a^T x(n) + w >= b, so they never make the QP infeasible and hold exactly
+    whenever they all can. Hard rows have no slack: if they cannot hold the solve fails (ok=False, status
+    "infeasible") and the caller brakes or escapes."""
+
+    steps: np.ndarray
+    normals_xy: np.ndarray
+    offsets: np.ndarray
+    soft: np.ndarray | None = None
+    normals_z: np.ndarray | None = None
+
+
+# The checked half-planes: steps (R,) int64, normals (R, 3), offsets (R,) m, soft (R,) 1.0 / 0.0.
+Planes = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _plane_violation(planes: Planes, positions: np.ndarray) -> float:
+    """Largest shortfall (m, >= 0) of the plan's positions (N+2, 3) from the half-planes."""
+    steps, normals, offsets, _ = planes
+    return max(0.0, float((offsets - np.einsum("ri,ri->r", normals, positions[steps])).max()))
+
+
+@dataclass(frozen=True, eq=False)
 class MpcSolution:
     """One MPC solve (N = horizon_steps). When not ok, the arrays are NaN: apply `braking_plan` instead."""
 
-    ok: bool  # True only if OSQP solved and every number is finite
-    status: str  # OSQP's status string, or "invalid_input"
+    ok: bool  # True only if the solver solved and every number is finite
+    status: str  # the solver's status string ("solved" ...), or "invalid_input"
     message: str | None  # one line when not ok
     inputs_mps2: np.ndarray  # (N+1, 3) u(0..N), ENU, before gravity is added (hover: u_z = g)
     positions_m: np.ndarray  # (N+2, 3) x(0..N+1); x(0) = the given position
     velocities_mps: np.ndarray  # (N+2, 3)
     max_state_violation: float  # largest slack (m or m/s); 0 when no soft bound is active
-    iterations: int
-    solve_time_s: float  # OSQP's own run time: data update (re-factorisation), iterations, polish
+    iterations: int  # solver iterations (0: the exact solver's closed form)
+    solve_time_s: float  # the solver's own reported run time (OSQP: update, iterations, polish; exact: DAQP's
+    # time, 0 for the closed form, which takes microseconds and is not timed: the controller reads no clock)
+    half_plane_violation_m: float = 0.0  # largest violation of the given half-planes by the plan (m)
+    path: str = "osqp"  # which solver produced it: "osqp", or the exact solver's "closed_form", "blocks",
+    # "active_set" (controller/qp.py)
 
 
 def predict(
@@ -241,6 +300,23 @@ class ModelPredictiveController:
         self._l_template, self._u_template = self._constant_bounds()
         self._p_rows, self._p_cols, self._p_indptr = self._p_pattern()
         self._shifts = [self._shift_permutations(k) for k in range(m)]
+        self._exact = params.solver == "exact"
+        # The exact solver's QP has one more variable: the half-planes' shared slack w (last), with w >= 0.
+        self._n_exact = self._n_var + 1
+        a_dense = self._a_matrix.toarray()
+        self._a_exact = np.zeros((a_dense.shape[0] + 1, self._n_exact))
+        self._a_exact[:-1, :-1] = a_dense
+        self._a_exact[-1, -1] = 1.0
+        self._l_exact = np.append(self._l_template, 0.0)
+        self._u_exact = np.append(self._u_template, np.inf)
+        self._resting = np.arange(self._n_exact) >= self._nu
+        self._state_min_c = np.ascontiguousarray(self._state_min)
+        self._state_max_c = np.ascontiguousarray(self._state_max)
+        self._effort_code = EFFORT_MODES.index(params.effort)
+        self._work: tuple | None = None  # _solve_exact's work arrays
+        self._default_w_terminal = np.diag(
+            [params.terminal_position_weight] * 3 + [params.terminal_velocity_weight] * 3
+        )
         self._setup_solver()
 
     @property
@@ -343,10 +419,22 @@ class ModelPredictiveController:
         scale = np.array([1.0, 1.0, 1.0] + [self._params.dt_s] * 3)
         return int(np.argmin(np.linalg.norm((plan[: self._n_steps] - x0) * scale, axis=1)))
 
+    def _exact_qp(self, w_terminal: np.ndarray) -> ExactQp:
+        """The exact solver for this terminal weight (P's upper triangle from `_p_data`, mirrored)."""
+        p = np.zeros((self._n_exact, self._n_exact))
+        p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
+        p = p + np.triu(p, 1).T
+        p[-1, -1] = 2.0 * self._params.half_plane_quadratic_weight
+        return ExactQp(p, self._a_exact, self._resting, iteration_limit=self._params.max_iterations)
+
     def _setup_solver(self) -> None:
         prm = self._params
-        self._w_terminal = np.diag([prm.terminal_position_weight] * 3 + [prm.terminal_velocity_weight] * 3)
-        self._q_terminal = 2.0 * self._g_terminal.T @ self._w_terminal
+        self._w_terminal = self._default_w_terminal
+        self._q_terminal = np.ascontiguousarray(2.0 * self._g_terminal.T @ self._w_terminal)
+        self._warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # z, y, plan states (M+1, 6)
+        if self._exact:
+            self._qp = self._exact_qp(self._w_terminal)
+            return
         p_matrix = sp.csc_matrix(
             (self._p_data(self._w_terminal), self._p_rows, self._p_indptr), shape=(self._n_var, self._n_var)
         )
@@ -372,7 +460,6 @@ class ModelPredictiveController:
             check_termination=5,
             verbose=False,
         )
-        self._warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # z, y, plan states (M+1, 6)
 
     # ----------------------------------------------------------------------------------------------- solve
     def _solve_vectors(
@@ -395,7 +482,222 @@ class ModelPredictiveController:
         hi[self._upper_rows] -= free
         return q, lo, hi
 
-    def _failure(self, status: str, message: str, iterations: int = 0, time_s: float = 0.0) -> MpcSolution:
+    def _checked_half_planes(self, half_planes: HalfPlanes | None) -> Planes | None:
+        """(steps (R,) int, normals (R, 3), offsets (R,), soft (R,) float 1/0) of the given half-planes, None
+        when there are none; ValueError for wrong shapes or steps."""
+        if half_planes is None or len(half_planes.steps) == 0:
+            return None
+        steps = np.asarray(half_planes.steps)
+        count = steps.shape[0]
+        normals = np.asarray(half_planes.normals_xy, dtype=float)
+        offsets = np.asarray(half_planes.offsets, dtype=float)
+        soft = np.ones(count, dtype=bool) if half_planes.soft is None else np.asarray(half_planes.soft)
+        normals_z = (
+            np.zeros(count) if half_planes.normals_z is None else np.asarray(half_planes.normals_z, float)
+        )
+        if (
+            steps.ndim != 1
+            or normals.shape != (count, 2)
+            or offsets.shape != (count,)
+            or soft.shape != (count,)
+            or normals_z.shape != (count,)
+        ):
+            raise ValueError(
+                "half-planes: steps (R,), normals_xy (R, 2), offsets (R,), soft (R,), normals_z (R,); "
+                f"got {count} steps"
+            )
+        if not np.issubdtype(steps.dtype, np.integer) or steps.min() < 1 or steps.max() > self._n_steps:
+            raise ValueError(f"half-plane steps must be integers in 1..{self._n_steps}")
+        if soft.dtype != bool:
+            raise ValueError(f"half-plane soft must be an array of bool, got {soft.dtype}")
+        return steps.astype(np.int64), np.column_stack([normals, normals_z]), offsets, soft.astype(float)
+
+    def _half_plane_rows(
+        self,
+        planes: Planes,
+        position: np.ndarray,
+        velocity: np.ndarray,
+        f: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The half-planes as extra rows of the exact QP: a^T G_p(n) u + w >= b - a^T h_p(n), with G_p(n) the
+        position rows of the input-to-state map at step n, h the free response, w the shared slack (last
+        variable; a hard row has 0 there). Returns (rows (R, n), lower (R,), upper (R,))."""
+        steps, normals, offsets, soft = planes
+        x0 = np.concatenate([position, velocity])
+        free = self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
+        first = 6 * (steps - 1)  # the x row of step n in the stacked states; y, z are the next two
+        rows = np.zeros((len(steps), self._n_exact))
+        rows[:, : self._nu] = (
+            normals[:, 0:1] * self._input_to_state[first]
+            + normals[:, 1:2] * self._input_to_state[first + 1]
+            + normals[:, 2:3] * self._input_to_state[first + 2]
+        )
+        rows[:, -1] = soft
+        lower = offsets - (
+            normals[:, 0] * free[first] + normals[:, 1] * free[first + 1] + normals[:, 2] * free[first + 2]
+        )
+        return rows, lower, np.full(len(steps), np.inf)
+
+    def _solve_exact(
+        self,
+        *,
+        position_m: np.ndarray,
+        velocity_mps: np.ndarray,
+        target_position_m: np.ndarray,
+        target_velocity_mps: np.ndarray,
+        external_inputs_mps2: np.ndarray,
+        half_planes: Planes | None = None,
+    ) -> MpcSolution | None:
+        """The solve with ExactQp: arithmetic in compiled kernels (mpc_kernels.py); the closed form in one
+        call. None when a number is not finite or implausible (the caller says which)."""
+        prm = self._params
+        n = self._n_steps
+        qp = self._qp
+        # Work arrays, reused from solve to solve (nothing returned refers to them).
+        if self._work is None or self._work[0] is not qp:
+            rows_n = self._l_exact.shape[0]
+            self._work = (
+                qp,
+                np.empty(self._n_exact),
+                np.empty(rows_n),
+                np.empty(rows_n),
+                np.empty(self._n_exact),
+                np.empty(qp.row_count),
+                np.empty(qp.resting_count),
+            )
+        _, q, lo, hi, z, rows, gradient = self._work
+        inputs = np.empty((n, 3))
+        positions = np.empty((n + 1, 3))
+        velocities = np.empty((n + 1, 3))
+        f = np.ascontiguousarray(external_inputs_mps2)
+        verdict, violation = solve_fast(
+            self._free_x0,
+            self._input_to_state,
+            self._q_terminal,
+            self._l_exact,
+            self._u_exact,
+            position_m,
+            velocity_mps,
+            target_position_m,
+            target_velocity_mps,
+            f,
+            self._g,
+            self._effort_code,
+            prm.input_weight,
+            prm.slack_weight,
+            PLAUSIBLE_MAGNITUDE,
+            qp.kernel_data,
+            prm.dt_s,
+            self._input_min,
+            self._input_max,
+            self._state_min_c,
+            self._state_max_c,
+            q,
+            lo,
+            hi,
+            z,
+            rows,
+            gradient,
+            inputs,
+            positions,
+            velocities,
+        )
+        if verdict == INVALID:
+            return None
+        q[-1] = prm.half_plane_weight  # the kernel set every slack's weight to slack_weight
+        extra: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[None, None, None] = (None, None, None)
+        fixed_rows_ok = False  # whether the closed form satisfied every fixed row (then only extras failed)
+        if half_planes is not None:
+            if not (np.all(np.isfinite(half_planes[1])) and np.all(np.isfinite(half_planes[2]))):
+                return None
+            extra = self._half_plane_rows(half_planes, position_m, velocity_mps, f)
+            if verdict == CLOSED_FORM and (extra[0] @ z < extra[1] - 1e-9).any():
+                verdict, fixed_rows_ok = NEEDS_SOLVER, True
+        path, iterations, time_s = "closed_form", 0, 0.0
+        if verdict != CLOSED_FORM:
+            result = qp.finish(q, lo, hi, fixed_rows_ok, z, rows, gradient, *extra)
+            if not result.ok:
+                message = f"exact QP: {result.status} ({result.message})"
+                return self._failure(
+                    result.status, message, result.iterations, result.solve_time_s, path=result.path
+                )
+            path, iterations, time_s = result.path, result.iterations, result.solve_time_s
+            violation = rollout(
+                position_m,
+                velocity_mps,
+                result.x[: self._nu].reshape(n, 3),
+                f,
+                self._g,
+                prm.dt_s,
+                self._input_min,
+                self._input_max,
+                self._state_min_c,
+                self._state_max_c,
+                inputs,
+                positions,
+                velocities,
+            )
+        if not np.isfinite(violation):
+            return self._failure("non_finite_plan", "the plan is not finite", iterations)
+        plane_violation = 0.0 if half_planes is None else _plane_violation(half_planes, positions)
+        for arr in (inputs, positions, velocities):
+            arr.setflags(write=False)  # handed on (e.g. into a HorizonPlan) without a copy
+        return MpcSolution(
+            ok=True,
+            status="solved",
+            message=None,
+            inputs_mps2=inputs,
+            positions_m=positions,
+            velocities_mps=velocities,
+            max_state_violation=violation if violation > prm.violation_tolerance else 0.0,
+            iterations=iterations,
+            solve_time_s=time_s,
+            half_plane_violation_m=plane_violation if plane_violation > prm.violation_tolerance else 0.0,
+            path=path,
+        )
+
+    def _solve_osqp_with_half_planes(
+        self,
+        q: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        planes: Planes,
+        arrays: dict[str, np.ndarray],
+        w_terminal: np.ndarray,
+    ):
+        """OSQP on the QP with the half-planes' rows and their shared slack w (the exact solver's problem),
+        set up for this solve alone (its rows change every solve); the result's x and y are cut back to
+        the problem without them, so the caller treats it like the warm-started solver's result."""
+        prm = self._params
+        n = self._n_exact
+        p = np.zeros((n, n))
+        p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
+        p[-1, -1] = 2.0 * prm.half_plane_quadratic_weight
+        extra, extra_lo, extra_hi = self._half_plane_rows(
+            planes, arrays["position_m"], arrays["velocity_mps"], arrays["external_inputs_mps2"]
+        )
+        a = sp.vstack([self._a_exact, extra], format="csc")
+        solver = osqp.OSQP()
+        solver.setup(
+            sp.csc_matrix(np.triu(p)),
+            np.append(q, prm.half_plane_weight),
+            a,
+            np.concatenate([lo, [0.0], extra_lo]),
+            np.concatenate([hi, [np.inf], extra_hi]),
+            eps_abs=prm.eps_abs,
+            eps_rel=prm.eps_rel,
+            max_iter=prm.max_iterations,
+            polishing=prm.polishing,
+            adaptive_rho=True,
+            adaptive_rho_interval=25,
+            check_termination=5,
+            verbose=False,
+        )
+        return solver.solve(raise_error=False)
+
+    def _failure(
+        self, status: str, message: str, iterations: int = 0, time_s: float = 0.0, path: str = "osqp"
+    ) -> MpcSolution:
         n = self._n_steps
         return MpcSolution(
             ok=False,
@@ -407,6 +709,7 @@ class ModelPredictiveController:
             max_state_violation=float("nan"),
             iterations=iterations,
             solve_time_s=time_s,
+            path=path,
         )
 
     def solve(
@@ -419,9 +722,14 @@ class ModelPredictiveController:
         external_inputs_mps2: np.ndarray,
         terminal_position_weight: np.ndarray | None = None,
         terminal_velocity_weight: np.ndarray | None = None,
+        half_planes: HalfPlanes | None = None,
     ) -> MpcSolution:
         """Plan u(0..N) from x(0) = (position_m, velocity_mps), (3,) each, to the terminal reference
         (target_position_m, target_velocity_mps), (3,) each, under the external inputs f(0..N), (N+1, 3).
+
+        half_planes: linear constraints on the plan's horizontal positions (`HalfPlanes`), soft or hard; both
+        solvers take them (OSQP sets up a one-off problem with the extra rows, without warm start). Steps
+        outside 1..N+1 or wrong shapes raise ValueError.
 
         terminal_*_weight: (3, 3) symmetric PSD W_p / W_v for this solve; None = the params' scalar * I3.
         Wrong shapes raise ValueError (a programming error). Non-finite or implausibly large numbers, or an
@@ -442,10 +750,22 @@ class ModelPredictiveController:
             if arr.shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
             arrays[name] = arr
+        planes = self._checked_half_planes(half_planes)
+        default_weights = terminal_position_weight is None and terminal_velocity_weight is None
+        if self._exact and default_weights and self._w_terminal is self._default_w_terminal:
+            solution = self._solve_exact(**arrays, half_planes=planes)  # checks its numbers in the kernel
+            if solution is not None:
+                return solution
         reasons = []
         values = np.concatenate([arr.ravel() for arr in arrays.values()])
         if not np.all(np.abs(values) <= PLAUSIBLE_MAGNITUDE):  # also False for NaN
             reasons = [why for name, arr in arrays.items() if (why := _magnitude_problem(arr, name))]
+        if planes is not None:
+            reasons += [
+                why
+                for name, arr in (("half-plane normals", planes[1]), ("half-plane offsets", planes[2]))
+                if (why := _magnitude_problem(arr, name))
+            ]
         wp, why_p = _checked_weight(
             terminal_position_weight, prm.terminal_position_weight, "terminal_position_weight"
         )
@@ -456,22 +776,37 @@ class ModelPredictiveController:
         if reasons:
             return self._failure("invalid_input", "; ".join(reasons))
 
-        w_terminal = np.zeros((6, 6))
-        w_terminal[:3, :3], w_terminal[3:, 3:] = wp, wv
+        if default_weights:
+            w_terminal = self._default_w_terminal
+        else:
+            w_terminal = np.zeros((6, 6))
+            w_terminal[:3, :3], w_terminal[3:, 3:] = wp, wv
         if not np.array_equal(w_terminal, self._w_terminal):
-            self._w_terminal = w_terminal
-            self._q_terminal = 2.0 * self._g_terminal.T @ w_terminal
-            self._solver.update(Px=self._p_data(w_terminal))
+            self._w_terminal = w_terminal if default_weights else w_terminal.copy()
+            self._q_terminal = np.ascontiguousarray(2.0 * self._g_terminal.T @ w_terminal)
+            if self._exact:
+                self._qp = self._exact_qp(w_terminal)
+            else:
+                self._solver.update(Px=self._p_data(w_terminal))
+        elif default_weights:
+            self._w_terminal = self._default_w_terminal
+        if self._exact:
+            solution = self._solve_exact(**arrays, half_planes=planes)
+            assert solution is not None  # the numbers were checked above
+            return solution
         x0 = np.concatenate([arrays["position_m"], arrays["velocity_mps"]])
         reference = np.concatenate([arrays["target_position_m"], arrays["target_velocity_mps"]])
         f = arrays["external_inputs_mps2"]
         q, lo, hi = self._solve_vectors(x0, reference, f)
-        self._solver.update(q=q, l=lo, u=hi)
-        if self._warm is not None:
-            z_prev, y_prev, plan_prev = self._warm
-            z_shift, y_shift = self._shifts[self._elapsed_steps(plan_prev, x0)]
-            self._solver.warm_start(x=z_prev[z_shift], y=y_prev[y_shift])
-        result = self._solver.solve(raise_error=False)
+        if planes is not None:
+            result = self._solve_osqp_with_half_planes(q, lo, hi, planes, arrays, w_terminal)
+        else:
+            self._solver.update(q=q, l=lo, u=hi)
+            if self._warm is not None:
+                z_prev, y_prev, plan_prev = self._warm
+                z_shift, y_shift = self._shifts[self._elapsed_steps(plan_prev, x0)]
+                self._solver.warm_start(x=z_prev[z_shift], y=y_prev[y_shift])
+            result = self._solver.solve(raise_error=False)
         info = result.info
         status, iterations, run_time = str(info.status), int(info.iter), float(info.run_time)
         accepted = ACCEPTED_STATUSES if prm.accept_inaccurate else ACCEPTED_STATUSES[:1]
@@ -495,7 +830,11 @@ class ModelPredictiveController:
         if not (np.all(np.isfinite(plan)) and np.isfinite(violation)):
             self._warm = None
             return self._failure("non_finite_plan", "the plan is not finite", iterations, run_time)
-        self._warm = (np.array(result.x), np.array(result.y), plan)
+        plane_violation = 0.0
+        if planes is None:
+            self._warm = (np.array(result.x), np.array(result.y), plan)
+        else:
+            plane_violation = _plane_violation(planes, positions)
         violation = violation if violation > prm.violation_tolerance else 0.0
         return MpcSolution(
             ok=True,
@@ -507,4 +846,5 @@ class ModelPredictiveController:
             max_state_violation=violation,
             iterations=iterations,
             solve_time_s=run_time,
+            half_plane_violation_m=plane_violation if plane_violation > prm.violation_tolerance else 0.0,
         )

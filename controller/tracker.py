@@ -32,9 +32,11 @@ without an accepted detection the track expires and the next detection starts a 
 from __future__ import annotations
 
 import bisect
+import math
 from dataclasses import dataclass
 from enum import StrEnum
 
+import numba
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
@@ -139,6 +141,39 @@ def _transition(
     return F, Q
 
 
+@numba.njit(cache=True)
+def _predicted(dt_s, tau_s, psd, x, p, x_out, p_out):  # pragma: no cover - compiled
+    """x_out (6,) = F x, p_out (6, 6) = sym(F P F^T + Q) for F, Q of `_transition` over dt_s: what
+    `estimate` hands out every tick, in one compiled call. Only filterpy ever moves the filter itself."""
+    b = math.exp(-dt_s / tau_s)
+    one_b, one_b2 = 1.0 - b, 1.0 - b * b
+    f_pv = tau_s * one_b  # F = [[I, f_pv I], [0, b I]]
+    q_pp = tau_s * tau_s * (dt_s - 2.0 * tau_s * one_b + 0.5 * tau_s * one_b2)
+    q_pv = tau_s * tau_s * (one_b - 0.5 * one_b2)
+    q_vv = 0.5 * tau_s * one_b2
+    fp = np.empty((6, 6))  # F P
+    for i in range(3):
+        x_out[i] = x[i, 0] + f_pv * x[3 + i, 0]
+        x_out[3 + i] = b * x[3 + i, 0]
+        for j in range(6):
+            fp[i, j] = p[i, j] + f_pv * p[3 + i, j]
+            fp[3 + i, j] = b * p[3 + i, j]
+    for i in range(6):
+        for j in range(3):
+            p_out[i, j] = fp[i, j] + f_pv * fp[i, 3 + j]
+            p_out[i, 3 + j] = b * fp[i, 3 + j]
+    for a in range(3):
+        p_out[a, a] += q_pp * psd[a]
+        p_out[a, 3 + a] += q_pv * psd[a]
+        p_out[3 + a, a] += q_pv * psd[a]
+        p_out[3 + a, 3 + a] += q_vv * psd[a]
+    for i in range(6):
+        for j in range(i + 1, 6):
+            mean = 0.5 * (p_out[i, j] + p_out[j, i])
+            p_out[i, j] = mean
+            p_out[j, i] = mean
+
+
 def transition(*, dt_s: float, params: TrackerParams) -> tuple[np.ndarray, np.ndarray]:
     """(F (6, 6), Q (6, 6)) of the decaying-velocity model over dt_s >= 0 (module docstring)."""
     psd = np.square(np.asarray(params.velocity_noise_mps_per_sqrt_s, dtype=float))
@@ -168,6 +203,7 @@ class PersonTracker:
         self.params = params or TrackerParams()
         self._tau = self.params.velocity_time_constant_s
         psd = np.square(np.asarray(self.params.velocity_noise_mps_per_sqrt_s, dtype=float))
+        self._psd = psd
         self._templates = _noise_templates(psd)
         self._memo: tuple[float, np.ndarray, np.ndarray] = (-1.0, np.eye(6), np.zeros((6, 6)))
         self._P0 = np.diag(np.asarray(self.params.initial_cov_diag, dtype=float))
@@ -190,11 +226,15 @@ class PersonTracker:
         """
         if self._t is None or not np.isfinite(now_s) or now_s - self._t > self.params.reset_after_s:
             return None
-        x, P, stamp = self._kf.x, self._kf.P, self._t
         if now_s > self._t:
-            F, Q = self._fq(now_s - self._t)
-            x, P, stamp = F @ x, F @ P @ F.T + Q, float(now_s)
-        return PersonEstimate(stamp_s=stamp, position_m=x[:3, 0], velocity_mps=x[3:, 0], cov=0.5 * (P + P.T))
+            x, cov = np.empty(6), np.empty((6, 6))
+            _predicted(now_s - self._t, self._tau, self._psd, self._kf.x, self._kf.P, x, cov)
+            stamp = float(now_s)
+        else:
+            x, P, stamp = self._kf.x[:, 0], self._kf.P, self._t
+            cov = 0.5 * (P + P.T)
+        cov.setflags(write=False)
+        return PersonEstimate(stamp_s=stamp, position_m=x[:3], velocity_mps=x[3:], cov=cov)
 
     def update(self, detection: Detection, *, now_s: float | None = None) -> Verdict:
         """Fuse one detection. Never raises for bad data; a rejected detection leaves the filter unchanged.
@@ -315,16 +355,18 @@ def _checked(detection: Detection) -> tuple[tuple[float, int], np.ndarray, np.nd
     """(sort key (stamp s, source id), z (3, 1), R (3, 3)) of a usable detection, or None."""
     try:
         key = (float(detection.stamp_s), int(detection.source_id))
-        z = np.asarray(detection.position_m, dtype=float).reshape(3, 1)
-        R = np.asarray(detection.cov_m2, dtype=float).reshape(3, 3)
+        z_list = np.asarray(detection.position_m, dtype=float).reshape(3).tolist()
+        r_list = np.asarray(detection.cov_m2, dtype=float).reshape(3, 3).tolist()
     except (TypeError, ValueError, AttributeError, OverflowError):
         return None
     # a sum is finite only if every term is (values near the float limit count as invalid too)
-    if not np.isfinite(key[0] + float(z.sum()) + float(R.sum())):
+    if not math.isfinite(key[0] + sum(z_list) + sum(sum(row) for row in r_list)):
         return None
-    if float(np.abs(R - R.T).max()) > 1e-9 * float(np.abs(R).max()):
+    (a, b, c), (d, e, f), (g, h, i) = r_list
+    if max(abs(b - d), abs(c - g), abs(f - h)) > 1e-9 * max(abs(v) for row in r_list for v in row):
         return None
-    R = 0.5 * (R + R.T)
-    if not _is_spd(R.tolist()):
+    b, c, f = 0.5 * (b + d), 0.5 * (c + g), 0.5 * (f + h)
+    sym = [[a, b, c], [b, e, f], [c, f, i]]
+    if not _is_spd(sym):
         return None
-    return key, z, R
+    return key, np.array(z_list).reshape(3, 1), np.array(sym)

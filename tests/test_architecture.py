@@ -23,8 +23,17 @@ LAYERS: dict[str, frozenset[str]] = {
     "webui": frozenset({"controller"}),
     "server": frozenset({"controller", "vehicles", "webui"}),
 }
-# Third-party libraries the pure core may use (plus the standard library).
-CONTROLLER_LIBRARIES = frozenset({"numpy", "scipy", "osqp", "filterpy"})
+# Third-party libraries the pure core may use (plus the standard library): numba compiles its kernels,
+# daqp is the exact QP's active-set solver (docs/fast-core.md).
+CONTROLLER_LIBRARIES = frozenset({"numpy", "scipy", "osqp", "filterpy", "numba", "daqp"})
+# Heavy libraries kept where they belong: the library -> the only modules (and their sub-modules) that may
+# import it. Dask distributed runs an experiment sweep on a cluster, nothing else.
+LIBRARY_HOMES: dict[str, tuple[str, ...]] = {
+    "numba": ("controller",),
+    "daqp": ("controller",),
+    "distributed": ("server.lab",),
+    "dask": ("server.lab",),
+}
 
 
 def module_name(path: Path, root: Path) -> str:
@@ -151,6 +160,39 @@ def test_controller_uses_only_the_standard_library_and_its_numeric_libraries():
     allowed = CONTROLLER_LIBRARIES | set(sys.stdlib_module_names) | {"__future__"}
     extra = {m: sorted(names - allowed) for m, names in external_imports(ROOT, "controller").items()}
     assert {m: names for m, names in extra.items() if names} == {}
+
+
+def misplaced_libraries(
+    root: Path, packages: Iterable[str], homes: Mapping[str, tuple[str, ...]]
+) -> list[str]:
+    """'module -> library' for every import of a library in `homes` outside the modules it is confined to."""
+    bad = []
+    for package in packages:
+        for module, names in sorted(external_imports(root, package).items()):
+            for lib in sorted(names & homes.keys()):
+                if not any(module == home or module.startswith(home + ".") for home in homes[lib]):
+                    bad.append(f"{module} -> {lib}")
+    return bad
+
+
+def test_heavy_libraries_are_imported_only_where_they_belong():
+    assert misplaced_libraries(ROOT, PACKAGES, LIBRARY_HOMES) == []
+
+
+def test_the_check_finds_a_library_outside_its_home(tmp_path):
+    _write(
+        tmp_path,
+        {
+            "app/__init__.py": "",
+            "app/lab/__init__.py": "",
+            "app/lab/sweep.py": "import distributed\n",
+            "app/station/__init__.py": "",
+            "app/station/api.py": "def late():\n    from distributed import Client\n",
+        },
+    )
+    assert misplaced_libraries(tmp_path, ["app"], {"distributed": ("app.lab",)}) == [
+        "app.station.api -> distributed"
+    ]
 
 
 def _write(root: Path, files: Mapping[str, str]) -> None:

@@ -41,6 +41,7 @@ from controller.messages import (
     VehicleState,
 )
 from controller.params import ControllerParams, FormationParams
+from controller.teammates import TeammateTable
 from controller.tracker import PersonTracker, TrackerStats, Verdict
 from vehicles.autopilot import AutopilotState, Setpoint
 from vehicles.detect.converter import ConverterStats, DetectionConverter
@@ -175,8 +176,8 @@ class Agent:
         self._ap = agent_params or AgentParams()
         self._tracker = PersonTracker(params.tracker)
         self._controller = FormationController(vehicle_id=self.vehicle_id, params=params)
-        self._plans: dict[int, HorizonPlan] = {}
-        self._sorted_plans: tuple[HorizonPlan, ...] | None = None  # _plans by id, rebuilt after a change
+        # The teammates' latest plans, checked on arrival and kept in arrays (controller/teammates.py).
+        self._teammates = TeammateTable(own_id=self.vehicle_id, plan_length=params.mpc.horizon_steps + 2)
         self._last_publish_s = -math.inf
         self._search: tuple[float, float] | None = None  # (time, yaw command) while searching
         self._last_control: ControlOutput | None = None
@@ -189,10 +190,8 @@ class Agent:
 
     def teammate_plans(self, now_s: float) -> tuple[HorizonPlan, ...]:
         """The teammates' latest plans not older than teammate_timeout_s, by vehicle id."""
-        if self._sorted_plans is None:
-            self._sorted_plans = tuple(p for _, p in sorted(self._plans.items()))
         limit = now_s - self._ap.teammate_timeout_s
-        return tuple(p for p in self._sorted_plans if p.stamp_s >= limit)
+        return tuple(p for p in self._teammates.plans() if p.stamp_s >= limit)
 
     def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
         """Run one control tick at now_s: take in messages, then follow the latest plan, re-plan, or hold."""
@@ -203,13 +202,13 @@ class Agent:
         # Between re-plans the estimate of the last re-plan serves (0.1 s old at 10 Hz: a 7 cm walk).
         person = self._last_person if last is not None else self._tracker.estimate(now_s)
         self._last_person = person
-        teammates = self.teammate_plans(now_s)
-        known = sum(1 for p in teammates if p.in_formation)
+        since = now_s - self._ap.teammate_timeout_s  # plans stamped before are forgotten
+        known = self._teammates.fresh_count(since)
         step = _Step()
         if last is not None and person is not None:
             step = _Step(control=last, plan=last.plan, setpoint=self._follow(now_s, last.plan, person))
         elif own is not None and inputs.role == AgentRole.FORMATION:
-            step = self._replan(now_s, own, person, teammates, known, inputs)
+            step = self._replan(now_s, own, person, since, known, inputs)
         elif own is not None and inputs.role == AgentRole.AIRBORNE:
             step = _Step(plan=hold_plan(state=own, params=self._params, in_formation=False))
         return AgentOutputs(
@@ -254,16 +253,18 @@ class Agent:
         now_s: float,
         own: AutopilotState,
         person: PersonEstimate | None,
-        teammates: tuple[HorizonPlan, ...],
+        since_s: float,
         known: int,
         inputs: AgentInputs,
     ) -> _Step:
-        """Solve the formation controller; steer to the roster slot when teammates are unheard."""
+        """Solve the formation controller on the teammates' plans stamped at or after since_s; steer to the
+        roster slot when teammates are unheard."""
         counts = self._counts
         slot = dict(inputs.roster).get(self.vehicle_id)
         used_slot = slot is not None and known < len(inputs.roster) - 1
+        phantoms: tuple[HorizonPlan, ...] = ()
         if used_slot and person is not None:
-            teammates = teammates + self._phantoms(now_s, person, inputs, teammates)
+            phantoms = self._phantoms(now_s, person, inputs, self._teammates.fresh_ids(since_s))
         if used_slot:
             counts["slot_ticks"] += 1
         try:
@@ -278,7 +279,7 @@ class Agent:
                     position_cov_m2=own.position_cov_m2,
                 ),
                 person=person,
-                teammates=teammates,
+                teammates=self._teammates.view(since_s, phantoms),
                 obstacles=inputs.obstacles,
                 formation=inputs.formation,
                 in_formation=True,
@@ -356,10 +357,10 @@ class Agent:
         )
 
     def _phantoms(
-        self, now_s: float, person: PersonEstimate, inputs: AgentInputs, heard: tuple[HorizonPlan, ...]
+        self, now_s: float, person: PersonEstimate, inputs: AgentInputs, heard_ids: set[int]
     ) -> tuple[HorizonPlan, ...]:
-        """Plans at the roster slots of the in-formation teammates not heard from, moving with the person."""
-        heard_ids = {p.vehicle_id for p in heard if p.in_formation}
+        """Plans at the roster slots of the in-formation teammates not heard from (heard_ids: the fresh
+        in-formation plans' vehicle ids), moving with the person."""
         n = self._params.mpc.horizon_steps + 2
         dt = self._params.mpc.dt_s
         velocity = np.array([person.velocity_mps[0], person.velocity_mps[1], 0.0])
@@ -399,10 +400,9 @@ class Agent:
             if not (np.all(np.isfinite(msg.positions_m)) and np.isfinite(msg.stamp_s) and msg.dt_s > 0):
                 counts["rejected_messages"] += 1
                 return
+            if self._teammates.update(msg) == "refused":  # e.g. an absurd covariance
+                counts["rejected_messages"] += 1
+                return
             counts["plans_received"] += 1
-            old = self._plans.get(msg.vehicle_id)
-            if old is None or msg.stamp_s >= old.stamp_s:
-                self._plans[msg.vehicle_id] = msg
-                self._sorted_plans = None
         else:
             counts["rejected_messages"] += 1

@@ -7,14 +7,15 @@ It holds the operator's formation parameters, static and virtual obstacles, and 
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
+    TAKEOFF, FORMATION --hold()--> HOLDING --release()--> FORMATION
     IDLE, airborne --(the operator starts the formation or releases it)--> FORMATION
-    TAKEOFF / FORMATION --(the autopilot lands or returns it by itself)--> LANDING
+    TAKEOFF / FORMATION / HOLDING --(the autopilot lands or returns it by itself)--> LANDING
 
-The roster holds only the vehicles airborne, heard and flown by skyring (vehicles/pilot.py). A MAV that is
-landing or landed has left formation control: it publishes plans marked not-in-formation (then none once on
-the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by themselves. Operator actions are
-methods that take effect at the next `step` (within one control period); a refused action raises
-`MissionError` with a message a person can act on and changes nothing.
+(`vehicles.pilot` has the whole machine.) The roster holds only the vehicles airborne, heard and flown by
+skyring. A MAV that is holding, landing or landed has left formation control: it publishes plans marked
+not-in-formation (then none once on the ground), so its teammates avoid it but re-space to 2 pi / (K - 1) by
+themselves. Operator actions are methods that take effect at the next `step` (within one control period); a
+refused action raises `MissionError` with a message a person can act on and changes nothing.
 """
 
 from __future__ import annotations
@@ -32,7 +33,6 @@ from vehicles.autopilot import Autopilot
 from vehicles.link_loss import silent_vehicle_obstacle
 from vehicles.links import Links
 from vehicles.pilot import (
-    FLYING_PHASES,
     AgentLink,
     MissionError,
     MissionParams,
@@ -212,14 +212,25 @@ class Mission:
             raise
 
     def land_all(self) -> None:
-        """Land every vehicle that is taking off or flying."""
+        """Land every vehicle that is taking off, flying, holding, or found flying (adopted)."""
         for v in self._vehicles.values():
-            if v.phase in FLYING_PHASES:
+            if v.airborne:
                 v.start_landing(self._now)
 
+    def hold(self, vehicle_id: int) -> None:
+        """Stop one flying vehicle where it is: it hovers out of formation control (its teammates avoid it
+        and re-space without it) until released or landed."""
+        v = self._vehicle(vehicle_id)
+        try:
+            v.hold(self._now)
+        except MissionError:
+            self._rejected_actions += 1
+            raise
+
     def release(self, vehicle_id: int) -> None:
-        """Give a landed vehicle back to the formation: it takes off again (when formation is enabled); or an
-        airborne one skyring does not fly: it joins (`VehiclePilot.release`)."""
+        """Give a vehicle back to the formation: a landed one takes off again (when formation is enabled), a
+        holding one rejoins from where it hovers, and an airborne one skyring does not fly joins
+        (`VehiclePilot.release`)."""
         v = self._vehicle(vehicle_id)
         try:
             v.release()

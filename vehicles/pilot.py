@@ -2,8 +2,15 @@
 
     IDLE --(enabled)--> TAKEOFF --(at height)--> FORMATION --land()--> LANDING --(on ground)--> LANDED
     LANDED --release()--> IDLE
+    TAKEOFF, FORMATION (in the air) --hold()--> HOLDING --release()--> FORMATION
     IDLE, airborne --(the operator starts the formation or releases it)--> FORMATION
-    TAKEOFF / FORMATION --(the autopilot lands or returns it by itself)--> LANDING
+    IDLE airborne, TAKEOFF, FORMATION, HOLDING --land(), land_all--> LANDING
+    TAKEOFF / FORMATION / HOLDING --(the autopilot lands or returns it by itself)--> LANDING
+
+A holding MAV hovers where the operator stopped it, out of formation control: its teammates avoid it and
+re-space without it; released, it rejoins from where it hovers. While the autopilot runs one of its own
+failsafes, release is refused in every phase: the autopilot's decision stands until it ends or the vehicle is
+down.
 
 The formation roster (the slots teammates space for) holds only vehicles that are airborne, heard, and flown
 by skyring: one on the ground (e.g. its autopilot refused to arm), one a pilot took, or one the autopilot
@@ -38,11 +45,13 @@ class Phase(StrEnum):
     IDLE = "idle"
     TAKEOFF = "takeoff"
     FORMATION = "formation"
+    HOLDING = "holding"  # hovering where the operator stopped it, out of formation control
     LANDING = "landing"
     LANDED = "landed"
 
 
-FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)
+FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)  # in the formation's roster
+AIRBORNE_PHASES = (Phase.TAKEOFF, Phase.FORMATION, Phase.HOLDING)  # what LAND ALL lands
 
 
 class MissionError(ValueError):
@@ -122,7 +131,7 @@ class AgentLink:
 
 class VehiclePilot:
     """The phase machine of one vehicle and the agent that flies it. `observe` then `tick`, every control
-    period; operator actions (`land`, `release`) take effect at once and show in the next readings.
+    period; operator actions (`land`, `hold`, `release`) take effect at once and show in the next readings.
 
     clock: only used to time agent ticks (e.g. time.perf_counter); None leaves tick_s unset.
     """
@@ -174,6 +183,22 @@ class VehiclePilot:
         return s is not None and s.in_air and s.mode in (FlightMode.LAND, FlightMode.RETURN)
 
     @property
+    def _ours(self) -> bool:
+        """skyring may command it: no pilot or autopilot failsafe has it, and the autopilot is not taking it
+        down or home."""
+        return not (self.released or self.leaving)
+
+    @property
+    def adopted(self) -> bool:
+        """Found flying and not (yet) flown by skyring: idle in the air."""
+        return self.phase == Phase.IDLE and self.state is not None and self.state.in_air
+
+    @property
+    def airborne(self) -> bool:
+        """What LAND ALL lands: taking off, flying formation, holding, or found flying."""
+        return self.phase in AIRBORNE_PHASES or self.adopted
+
+    @property
     def in_roster(self) -> bool:
         """Counts in the formation: taking off or flying it, airborne, heard, and flown by skyring (not
         taken by a pilot or the autopilot's failsafe, not landing)."""
@@ -188,8 +213,8 @@ class VehiclePilot:
 
     # ---- operator actions ---------------------------------------------------------------------------------
     def land(self, now_s: float) -> None:
-        """Land now; MissionError when already on the ground."""
-        if self.phase in (Phase.IDLE, Phase.LANDED):
+        """Land now (also a vehicle found flying); MissionError when already on the ground."""
+        if self.phase == Phase.LANDED or (self.phase == Phase.IDLE and not self.adopted):
             raise MissionError(f"vehicle {self.vehicle_id} is on the ground already ({self.phase.value})")
         self.start_landing(now_s)
 
@@ -198,10 +223,27 @@ class VehiclePilot:
         self.command_s = now_s
         self.autopilot.land()
 
+    def hold(self, now_s: float) -> None:
+        """Stop where it is, out of formation control; MissionError unless taking off or flying formation
+        in the air."""
+        if self.phase not in FLYING_PHASES:
+            raise MissionError(
+                f"vehicle {self.vehicle_id} is {self.phase.value}; only a vehicle taking off or flying "
+                "formation can be held"
+            )
+        if self.state is None or not self.state.in_air:
+            raise MissionError(
+                f"vehicle {self.vehicle_id} is not in the air yet; land it instead to stop its takeoff"
+            )
+        self.phase = Phase.HOLDING
+        self.command_s = now_s
+        self.autopilot.hold()
+
     def release(self) -> None:
         """Give the vehicle back to the formation: a landed one takes off again (when formation is enabled);
-        an airborne one skyring does not fly (found flying, or a pilot gave it back) joins it. MissionError
-        otherwise, and while the autopilot runs a failsafe: its decision stands until it ends or it is down.
+        a holding one rejoins from where it hovers; an airborne one skyring does not fly (found flying, or a
+        pilot gave it back) joins it. MissionError otherwise, and while the autopilot runs a failsafe (in any
+        phase): its decision stands until it ends or it is down.
         """
         s = self.state
         if s is not None and s.failsafe:
@@ -214,12 +256,17 @@ class VehiclePilot:
         if self.phase == Phase.LANDED:
             self.phase = Phase.IDLE
             return
+        if self.phase == Phase.HOLDING:
+            self.phase = Phase.FORMATION  # its set-points end the hold
+            # A pilot took it while it held: re-engage it, as a vehicle a pilot gave back in formation.
+            self.rejoin = s is not None and s.in_air and s.released
+            return
         airborne_idle = self.phase == Phase.IDLE and s is not None and s.in_air
         taken = self.phase in FLYING_PHASES and s is not None and s.in_air and s.released
         if not (airborne_idle or taken):
             raise MissionError(
-                f"vehicle {self.vehicle_id} is {self.phase.value}; only a landed vehicle, or an airborne one "
-                "skyring does not fly, can be released"
+                f"vehicle {self.vehicle_id} is {self.phase.value}; only a landed or holding vehicle, or an "
+                "airborne one skyring does not fly, can be released"
             )
         self.resume = True
         self.rejoin = taken
@@ -240,7 +287,7 @@ class VehiclePilot:
             return None
         retry = now_s - self.command_s >= self.params.retry_s
         settled = now_s - self.command_s >= self.params.mode_grace_s
-        if self.phase in FLYING_PHASES and self.leaving and settled:
+        if self.phase in AIRBORNE_PHASES and self.leaving and settled:
             self.phase = Phase.LANDING  # its autopilot lands (or returns) it: that landing stands
             self.command_s = now_s
         elif self.rejoin and self.phase in FLYING_PHASES and s.in_air and not s.failsafe:
@@ -281,6 +328,12 @@ class VehiclePilot:
                 self.autopilot.hold()
             elif enabled:
                 self.paused = False
+        elif self.phase == Phase.HOLDING:
+            if not s.in_air and not s.armed:
+                self.phase = Phase.LANDED
+            elif retry and s.mode not in (FlightMode.HOLD, FlightMode.MANUAL) and self._ours:
+                self.command_s = now_s
+                self.autopilot.hold()  # a lost hold command (not one a pilot or the autopilot overrode)
         elif self.phase == Phase.LANDING:
             if not s.in_air:
                 self.phase = Phase.LANDED

@@ -8,22 +8,32 @@ from __future__ import annotations
 import numpy as np
 from viser import transforms as tf
 
-# One colour per MAV (cycled): distinct on a light background, none of them the person's or the obstacles'.
+# One colour per MAV, 16 of them (cycled beyond): distinct on a light background, and none of them the red of
+# virtual obstacles, the brown of trees, the greys and black of the person, or the amber of the ellipsoid.
 VEHICLE_COLORS: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180),
-    (255, 127, 14),
-    (44, 160, 44),
-    (148, 103, 189),
-    (23, 190, 207),
-    (227, 119, 194),
-    (188, 189, 34),
-    (140, 86, 75),
+    (31, 119, 180),  # blue
+    (255, 127, 14),  # orange
+    (44, 160, 44),  # green
+    (148, 103, 189),  # purple
+    (23, 190, 207),  # cyan
+    (227, 119, 194),  # pink
+    (188, 189, 34),  # olive
+    (31, 60, 130),  # navy
+    (174, 199, 232),  # light blue
+    (255, 187, 120),  # light orange
+    (152, 223, 138),  # light green
+    (197, 176, 213),  # light purple
+    (158, 218, 229),  # light cyan
+    (247, 182, 210),  # light pink
+    (219, 219, 141),  # light olive
+    (0, 128, 128),  # teal
 )
 
 
 def vehicle_color(vehicle_id: int) -> tuple[int, int, int]:
-    """The colour of MAV `vehicle_id` (body, label, horizon plan)."""
-    return VEHICLE_COLORS[vehicle_id % len(VEHICLE_COLORS)]
+    """The colour of MAV `vehicle_id` (body, frustum, horizon plan, its row in the team table and its plot
+    lines): MAV 1 has the first colour, MAV 16 the sixteenth."""
+    return VEHICLE_COLORS[(vehicle_id - 1) % len(VEHICLE_COLORS)]
 
 
 def ellipsoid_pose(cov_m2: np.ndarray, *, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -96,3 +106,35 @@ def box_segments(low_m: np.ndarray, high_m: np.ndarray) -> np.ndarray:
     (x0, y0), (x1, y1) = np.asarray(low_m, dtype=float)[:2], np.asarray(high_m, dtype=float)[:2]
     corners = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0], [x0, y0, 0.0]])
     return polyline_segments(corners)
+
+
+def ellipse_outline_segments(
+    center_m: np.ndarray, semi_axes_m: np.ndarray, wxyz: np.ndarray, *, count: int = 48
+) -> np.ndarray:
+    """(3 * count, 2, 3) the three principal ellipses of an ellipsoid (semi-axes (3,) along the columns of the
+    rotation wxyz (4,), centred at center_m (3,)): its outline, drawn on top of the transparent fill."""
+    rotation = tf.SO3(np.asarray(wxyz, dtype=float)).as_matrix()
+    a = np.asarray(semi_axes_m, dtype=float)
+    angles = np.linspace(0.0, 2.0 * np.pi, count + 1)
+    c, s = np.cos(angles), np.sin(angles)
+    rings = []
+    for i, j in ((0, 1), (1, 2), (0, 2)):
+        local = np.zeros((count + 1, 3))
+        local[:, i] = a[i] * c
+        local[:, j] = a[j] * s
+        rings.append(polyline_segments(np.asarray(center_m, dtype=float) + local @ rotation.T))
+    return np.concatenate(rings)
+
+
+def north_arrow_segments(base_m: np.ndarray, length_m: float) -> np.ndarray:
+    """(3, 2, 3) an arrow on the ground from base_m (3,) pointing north (+y): shaft and two barbs."""
+    b = np.asarray(base_m, dtype=float)
+    tip = b + np.array([0.0, length_m, 0.0])
+    barb = 0.3 * length_m
+    return np.array(
+        [
+            [b, tip],
+            [tip, tip + np.array([-0.5 * barb, -barb, 0.0])],
+            [tip, tip + np.array([0.5 * barb, -barb, 0.0])],
+        ]
+    )

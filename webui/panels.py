@@ -1,149 +1,188 @@
-"""The operator's controls in viser's GUI: formation parameters, virtual obstacles, a card per vehicle with
-Land/Release, LAND ALL, start/stop formation, and live plots of the fused covariance trace and tracking error.
+"""The operator's controls in viser's GUI.
+
+Two windows:
+- the **Mission** window, floating at the bottom left of the 3-D view, apart from every scrolling list: the
+  header (mission time, UTC, recording with the log's path, real-time factor), the alert summary and
+  **LAND ALL**. Shift+L (a viser command hotkey, handled in the page itself: nothing is loaded from outside)
+  opens the same confirmation as the button. It stays where it is whatever the other panel scrolls to,
+  with 3 or 16 MAVs.
+- the control panel, docked on the right, in tabs: Team (`team_panel`: the table of MAVs, one MAV's detail
+  with Hold / Land / Release), Alerts (`alerts_panel`), Formation (d_des / h_des, start / stop, virtual
+  obstacles), View (camera: frame the formation, follow the person, top-down; the colour legend; the
+  ellipsoid's size; the team origin) and Plots (`plots`).
 
 Every control calls the same `OperatorActions` the REST API calls; a refusal (ValueError) becomes a
-notification to the client that asked, and the control snaps back to the ground station's value. Landing,
-LAND ALL and release sit behind a per-client confirmation modal. viser runs these callbacks on its own
-threads, so the actions object must be thread-safe (the ground station's is).
+notification to the client that asked, and the control snaps back to the ground station's value. Whatever
+takes a MAV off the ground (Start formation, Release of a landed MAV) or lands it (Land, LAND ALL) sits behind
+a per-client confirmation modal; when the pre-take-off checks (person keep-out, d_min) refuse a start or a
+release, a second modal offers the logged override. viser runs these callbacks on its own threads, so the
+actions object must be thread-safe (the ground station's is).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import threading
-from collections import deque
 from collections.abc import Callable
 from typing import Any, Literal
 
 import numpy as np
 import viser
-import viser.uplot
 
-from webui.geometry import ground_point
-from webui.view import OperatorActions, SceneView, VehicleView
+from webui.alerts_panel import AlertsPanel
+from webui.camera import CameraDirector
+from webui.cards import alert_summary_html, header_html, legend_html
+from webui.geometry import ellipsoid_pose, ground_point
+from webui.plots import LivePlots, PlotHistory
+from webui.scene import LEGEND, ellipsoid_label
+from webui.team_panel import TeamPanel
+from webui.view import OperatorActions, SceneView
 
 log = logging.getLogger(__name__)
 
-PLOT_WINDOW_S = 120.0  # seconds of history the plots show
-STALE_FLAG = "STALE"
-FAILSAFE_FLAG = "FAILSAFE"  # the autopilot runs its own failsafe (PX4: Land, Hold, Return)
-REFUSED_FLAG = "ARMING REFUSED"  # the autopilot refused the take-off; its reason follows
-HELD_FLAG = "CANNOT TAKE OFF HERE"  # the pre-take-off checks (person keep-out, d_min) refuse it
-
-
-AGENT_LOST_FLAG = "AGENT LOST"
-SKEW_FLAG = "CLOCK SKEW"
-
-
-def agent_line(vehicle: VehicleView) -> str:
-    """The card's line about a networked agent: lost, clock skew, the latest command's outcome per vehicle."""
-    a = vehicle.agent
-    if a is None:
-        return ""
-    parts = [f"**{AGENT_LOST_FLAG}** ({a.age_s:.1f} s)" if a.lost else "agent ok"]
-    if a.station_lost:
-        parts.append("it lost the station")
-    if a.clock_offset_s is not None:
-        skew = f" **{SKEW_FLAG}**" if a.clock_skew else ""
-        parts.append(f"clock {a.clock_offset_s * 1e3:+.0f} ms{skew}")
-    if a.commands:
-        command_id, action, outcome, message = a.commands[-1]
-        parts.append(f"cmd {command_id} {action}: {outcome}" + (f" ({message})" if message else ""))
-    return " · ".join(parts)
-
-
-def vehicle_card(vehicle: VehicleView) -> str:
-    """Markdown for one vehicle's card: phase, the autopilot's own mode, armed, link age (flagged when
-    stale), solver, battery; for an onboard agent its link, clock and last command; then, when there is one,
-    the autopilot's failsafe and why, why it refused to arm, and why the ground station would not let it take
-    off where it stands."""
-    link = f"{vehicle.link_age_s:.1f} s" + (f" **{STALE_FLAG}**" if vehicle.link_stale else "")
-    solver = "-" if vehicle.solver_time_s is None else f"{vehicle.solver_time_s * 1e3:.2f} ms"
-    battery = "unknown" if vehicle.battery_fraction is None else f"{vehicle.battery_fraction * 100:.0f} %"
-    status = f" ({vehicle.solve_status})" if vehicle.solve_status else ""
-    mode = vehicle.autopilot_mode or vehicle.mode
-    formation = " · in formation" if vehicle.in_formation else ""
-    lines = [
-        f"**MAV {vehicle.vehicle_id}**: {vehicle.phase}{formation}",
-        f"autopilot {mode}, {'armed' if vehicle.armed else 'disarmed'}, "
-        f"{'in air' if vehicle.in_air else 'on ground'}",
-        f"link {link} · solver {solver}{status} · battery {battery}",
-    ]
-    if vehicle.agent is not None:
-        lines.append(agent_line(vehicle))
-    if vehicle.failsafe:
-        lines.append(f"**{FAILSAFE_FLAG}**: {vehicle.failsafe_reason or 'the autopilot runs its failsafe'}")
-    if vehicle.arming_refusal:
-        lines.append(f"**{REFUSED_FLAG}**: {vehicle.arming_refusal}")
-    if vehicle.takeoff_check:
-        lines.append(f"**{HELD_FLAG}**: {vehicle.takeoff_check}")
-    return "  \n".join(lines)
+NotifyColor = Literal["red", "green", "blue", "orange"]
+LAND_ALL_HOTKEY = "L"
+LAND_ALL_MODIFIER = "shift"
+LAND_ALL_SHORTCUT = "Shift+L"
+MISSION_WINDOW_WIDTH_PX = 430
+CONTROL_PANEL_WIDTH_PX = 470
 
 
 def status_line(view: SceneView) -> str:
-    """Markdown summary at the top of the panel: time, formation state and the team's size in formation."""
+    """Markdown summary at the top of the Formation tab: its state, the team in formation, d_des and h_des."""
     flying = sum(v.in_formation for v in view.vehicles)
     state = "running" if view.formation_enabled else "stopped (holding)"
     return (
-        f"t = {view.time_s:.1f} s · formation {state} · "
-        f"{flying}/{len(view.vehicles)} MAVs flying formation  \n"
+        f"formation {state} · {flying}/{len(view.vehicles)} MAVs flying formation  \n"
         f"d_des {view.formation.d_des_m:.1f} m · h_des {view.formation.h_des_m:.1f} m"
     )
+
+
+def view_info(view: SceneView, sigma: float) -> str:
+    """Markdown of the View tab: the drawn ellipsoid's size and the team origin."""
+    lines = []
+    estimate = view.person_estimate
+    size = "no estimate yet"
+    if estimate is not None and np.all(np.isfinite(estimate.position_m)):
+        try:
+            semi_axes, _ = ellipsoid_pose(estimate.position_cov_m2, sigma=sigma)
+            size = ellipsoid_label(2.0 * semi_axes, sigma)
+        except ValueError:
+            size = "covariance not finite"
+    lines.append(f"person ellipsoid (full axes, {sigma:g} standard deviations): {size}")
+    o = view.origin
+    if o is None:
+        lines.append("team origin: no geodetic origin (simulation: the local ENU frame only)")
+    else:
+        lines.append(
+            f"team origin: {o.lat_deg:.6f}, {o.lon_deg:.6f} (lat, lon, WGS-84), {o.alt_m:.1f} m AMSL; "
+            "x east, y north, z up"
+        )
+    return "  \n".join(lines)
 
 
 class OperatorPanel:
     """Builds the GUI once from the first view and refreshes it from every later one (`refresh`)."""
 
     def __init__(
-        self, server: viser.ViserServer, actions: OperatorActions, initial: SceneView, *, plot_every: int = 5
+        self,
+        server: viser.ViserServer,
+        actions: OperatorActions,
+        initial: SceneView,
+        *,
+        plot_every: int = 5,
+        camera: CameraDirector | None = None,
+        sigma: float = 2.0,
     ) -> None:
         self._server = server
         self._actions = actions
+        self._camera = camera or CameraDirector()
+        self._sigma = sigma
         self._lock = threading.Lock()
         self._pending_clicks: dict[int, float] = {}  # client id -> radius of the obstacle to place
         self._click_registered = False
+        self._open_modals: dict[tuple[int, str], Any] = {}  # (client id, title) -> the modal shown
         self._view = initial
         self._shown_formation = initial.formation
         self._plot_every = plot_every
         self._refreshes = 0
-        self._history: deque[tuple[float, float, float]] = deque()
         gui = server.gui
+        self._build_mission_window(gui, initial)
+        tabs = gui.add_tab_group()
+        with tabs.add_tab("Team", viser.Icon.USERS) as team_tab:
+            self.team = TeamPanel(gui, actions, initial, run=self._run, confirm=self._confirm)
+        alerts_tab = tabs.add_tab("Alerts", viser.Icon.ALERT_TRIANGLE)
+        self.alerts = AlertsPanel(gui, alerts_tab, actions, clicked=self.clicked, announce=self._announce)
+        with tabs.add_tab("Formation", viser.Icon.CIRCLE_DOTTED):
+            self._build_formation(gui, initial)
+            self._build_obstacles(gui, initial)
+        with tabs.add_tab("View", viser.Icon.CAMERA):
+            self._build_view(gui, initial)
+        with tabs.add_tab("Plots", viser.Icon.CHART_LINE):
+            ids = [v.vehicle_id for v in initial.vehicles]
+            self.history = PlotHistory(ids)
+            self.plots = LivePlots(gui, ids, self.team.colors)
+        del team_tab
+        self.refresh(initial)
+
+    # ---- building -----------------------------------------------------------------------------------------
+
+    def _build_mission_window(self, gui: viser.GuiApi, initial: SceneView) -> None:
+        self.mission_window = gui.add_panel()
+        with self.mission_window.add_tab("Mission", viser.Icon.SHIELD_CHECK):
+            self.header = gui.add_html(header_html(initial))
+            self.alert_summary = gui.add_html(alert_summary_html(initial.alerts))
+            self.land_all_button = gui.add_button(
+                "LAND ALL",
+                color="red",
+                icon=viser.Icon.PLANE_ARRIVAL,
+                hint=f"Land every MAV where it is (asks to confirm). Shortcut: {LAND_ALL_SHORTCUT}",
+            )
+            gui.add_markdown(
+                f"Shortcut **{LAND_ALL_SHORTCUT}** (with the 3-D view focused) opens the same dialog."
+            )
+        self.mission_window.float(x=12, y=-12, width=MISSION_WINDOW_WIDTH_PX)
+        self.land_all_button.on_click(self._on_land_all)
+        self.land_all_command = gui.add_command(
+            "LAND ALL",
+            description="Land every MAV where it is (asks to confirm)",
+            hotkey=LAND_ALL_HOTKEY,
+            modifier=LAND_ALL_MODIFIER,
+            icon=viser.Icon.PLANE_ARRIVAL,
+        )
+        self.land_all_command.on_trigger(self._on_land_all)
+
+    def _build_formation(self, gui: viser.GuiApi, initial: SceneView) -> None:
         self._status = gui.add_markdown(status_line(initial))
-        with gui.add_folder("Formation"):
-            f = initial.formation
-            self._d_des = gui.add_slider(
-                "d_des (m)",
-                min=initial.d_des_range_m.low,
-                max=initial.d_des_range_m.high,
-                step=0.1,
-                initial_value=f.d_des_m,
-                hint="Desired horizontal distance from the person",
+        f = initial.formation
+        self._d_des = gui.add_slider(
+            "d_des (m)",
+            min=initial.d_des_range_m.low,
+            max=initial.d_des_range_m.high,
+            step=0.1,
+            initial_value=f.d_des_m,
+            hint="Desired horizontal distance from the person",
+        )
+        self._h_des = gui.add_slider(
+            "h_des (m)",
+            min=initial.h_des_range_m.low,
+            max=initial.h_des_range_m.high,
+            step=0.1,
+            initial_value=f.h_des_m,
+            hint="Desired height above the person",
+        )
+        self._d_des.on_update(self._on_formation_input)
+        self._h_des.on_update(self._on_formation_input)
+        start = gui.add_button("Start formation", color="green", icon=viser.Icon.PLAYER_PLAY)
+        stop = gui.add_button("Stop formation (hold)", icon=viser.Icon.PLAYER_PAUSE)
+        start.on_click(self._on_start_formation)
+        stop.on_click(
+            self.clicked(
+                lambda: self._actions.set_formation_enabled(False), "Formation stopped: MAVs hold position"
             )
-            self._h_des = gui.add_slider(
-                "h_des (m)",
-                min=initial.h_des_range_m.low,
-                max=initial.h_des_range_m.high,
-                step=0.1,
-                initial_value=f.h_des_m,
-                hint="Desired height above the person",
-            )
-            self._d_des.on_update(self._on_formation_input)
-            self._h_des.on_update(self._on_formation_input)
-            start = gui.add_button("Start formation", color="green", icon=viser.Icon.PLAYER_PLAY)
-            stop = gui.add_button("Stop formation (hold)", icon=viser.Icon.PLAYER_PAUSE)
-            start.on_click(self._on_start)
-            stop.on_click(
-                lambda e: self._do(
-                    e.client,
-                    lambda: actions.set_formation_enabled(False),
-                    "Formation stopped: MAVs hold position",
-                )
-            )
-        self._land_all = gui.add_button("LAND ALL", color="red", icon=viser.Icon.PLANE_ARRIVAL)
-        self._land_all.on_click(self._on_land_all)
-        self._vehicle_folder = gui.add_folder("Vehicles")
-        self._cards: dict[int, dict[str, Any]] = {}
+        )
+
+    def _build_obstacles(self, gui: viser.GuiApi, initial: SceneView) -> None:
         self._obstacle_folder = gui.add_folder("Virtual obstacles")
         with self._obstacle_folder:
             radii = initial.obstacle_radius_range_m
@@ -158,55 +197,34 @@ class OperatorPanel:
             add.on_click(self._on_add_obstacle)
             self._obstacle_list = gui.add_markdown("none")
         self._obstacle_buttons: dict[str, Any] = {}
-        with gui.add_folder("Plots"):
-            self.trace_plot = gui.add_uplot(
-                *_plot_args("fused covariance trace (m^2)", (200, 140, 0)),
-                title="Fused position covariance trace",
-                aspect=2.0,
-            )
-            self.error_plot = gui.add_uplot(
-                *_plot_args("tracking error (m)", (200, 40, 40)),
-                title="Tracking error (simulation)",
-                aspect=2.0,
-            )
-        self.refresh(initial)
+
+    def _build_view(self, gui: viser.GuiApi, initial: SceneView) -> None:
+        frame = gui.add_button("Frame the formation", icon=viser.Icon.FOCUS_CENTERED)
+        follow = gui.add_button("Follow the person (on / off)", icon=viser.Icon.WALK)
+        top = gui.add_button("Top-down, north up", icon=viser.Icon.ARROW_BIG_DOWN_LINES)
+        frame.on_click(lambda e: self._camera_action(e, "frame"))
+        follow.on_click(lambda e: self._camera_action(e, "follow"))
+        top.on_click(lambda e: self._camera_action(e, "top"))
+        self._view_info = gui.add_markdown(view_info(initial, self._sigma))
+        gui.add_html(legend_html(LEGEND + (("each MAV: its own colour (Team tab)", (31, 119, 180)),)))
 
     # ---- refresh from the ground station -------------------------------------------------------------------
 
     def refresh(self, view: SceneView) -> None:
-        """Show `view`: status, slider values and ranges, vehicle cards, obstacle list, plots."""
+        """Show `view`: header, alerts, team, formation, obstacles, view information, plots."""
         self._view = view
-        self._status.content = status_line(view)
+        _set(self.header, header_html(view))
+        _set(self.alert_summary, alert_summary_html(view.alerts))
+        self.team.refresh(view)
+        self.alerts.refresh(view.alerts)
+        _set(self._status, status_line(view))
         _set_range(self._d_des, view.d_des_range_m.low, view.d_des_range_m.high)
         _set_range(self._h_des, view.h_des_range_m.low, view.h_des_range_m.high)
         if view.formation != self._shown_formation:  # changed elsewhere (the API, another client)
             self._show_formation(view)
-        for vehicle in view.vehicles:
-            self._refresh_card(vehicle)
         self._refresh_obstacles(view)
+        _set(self._view_info, view_info(view, self._sigma))
         self._record(view)
-
-    def _refresh_card(self, vehicle: VehicleView) -> None:
-        card = self._cards.get(vehicle.vehicle_id)
-        if card is None:
-            gui = self._server.gui
-            with self._vehicle_folder:
-                card = {
-                    "text": gui.add_markdown(vehicle_card(vehicle)),
-                    "land": gui.add_button(f"Land MAV {vehicle.vehicle_id}", color="orange"),
-                    "release": gui.add_button(f"Release MAV {vehicle.vehicle_id} to formation"),
-                }
-            vid = vehicle.vehicle_id
-            card["land"].on_click(lambda e: self._on_land(e, vid))
-            card["release"].on_click(lambda e: self._on_release(e, vid))
-            self._cards[vid] = card
-        text = vehicle_card(vehicle)
-        if card["text"].content != text:
-            card["text"].content = text
-        adopted = vehicle.phase.lower() == "idle" and vehicle.in_air and not vehicle.failsafe
-        releasable = vehicle.phase.lower() == "landed" or adopted
-        if card["release"].visible != releasable:
-            card["release"].visible = releasable
 
     def _refresh_obstacles(self, view: SceneView) -> None:
         virtual = [o for o in view.obstacles if o.kind == "virtual"]
@@ -225,39 +243,61 @@ class OperatorPanel:
             for obstacle_id in ids:
                 button = self._server.gui.add_button(f"Remove {obstacle_id}", icon=viser.Icon.TRASH)
                 button.on_click(
-                    lambda e, oid=obstacle_id: self._do(
-                        e.client, lambda: self._actions.remove_obstacle(oid), f"Obstacle {oid} removed"
+                    self.clicked(
+                        lambda oid=obstacle_id: self._actions.remove_obstacle(oid),
+                        f"Obstacle {obstacle_id} removed",
                     )
                 )
                 self._obstacle_buttons[obstacle_id] = button
 
     def _record(self, view: SceneView) -> None:
-        if self._history and self._history[-1][0] >= view.time_s:  # the same instant again: nothing new
-            return
-        estimate = view.person_estimate
-        trace = estimate.position_cov_trace_m2 if estimate is not None else math.nan
-        error = view.tracking_error_m if view.tracking_error_m is not None else math.nan
-        self._history.append((view.time_s, trace, error))
-        while self._history and self._history[0][0] < view.time_s - PLOT_WINDOW_S:
-            self._history.popleft()
+        added = self.history.record(view)
         self._refreshes += 1
-        if self._refreshes % self._plot_every:
-            return
-        t, tr, err = (np.array(c, dtype=float) for c in zip(*self._history, strict=True))
-        self.trace_plot.data = (t, tr)
-        self.error_plot.data = (t, err)
+        if added and (len(self.history) <= 2 or self._refreshes % self._plot_every == 0):
+            self.plots.push(self.history)
 
     # ---- operator input ------------------------------------------------------------------------------------
 
-    def _do(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> None:
-        """`_run` for a button callback, which must return None."""
-        self._run(client, action, done)
+    def select_vehicle(self, vehicle_id: int, client: viser.ClientHandle | None) -> None:
+        """A MAV was clicked in the 3-D view: show its detail in the Team tab."""
+        del client
+        self.team.select(vehicle_id)
+
+    def _camera_action(self, event: viser.GuiEvent, what: str) -> None:
+        client = event.client
+        if client is None:
+            return
+        try:
+            if what == "frame":
+                self._camera.set_following(client, False, self._view)
+                self._camera.frame_formation(client, self._view)
+            elif what == "top":
+                self._camera.top_down(client, self._view)
+            else:
+                follow = not self._camera.following(client.client_id)
+                self._camera.set_following(client, follow, self._view)
+                _notify(
+                    client,
+                    "View",
+                    "Following the person" if follow else "Stopped following the person",
+                    color="blue",
+                )
+        except (AssertionError, ValueError) as exc:  # the client has not reported its camera yet
+            _notify(client, "View", f"the camera is not ready yet, try again ({exc})", color="red")
+
+    def clicked(self, action: Callable[[], object], done: str | None) -> Callable[[viser.GuiEvent], None]:
+        """A button callback that runs `action` for the client that clicked (see `_run`)."""
+
+        def on_click(event: viser.GuiEvent) -> None:
+            self._run(event.client, action, done)
+
+        return on_click
 
     def _run(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> bool:
         """Run one operator action; tell the client the outcome. Never raises: a GUI callback must not die."""
         try:
             action()
-        except ValueError as exc:
+        except (ValueError, KeyError) as exc:
             _notify(client, "Refused", str(exc), color="red")
             return False
         except Exception as exc:  # noqa: BLE001 - a bug in a command must not kill the GUI thread
@@ -267,6 +307,10 @@ class OperatorPanel:
         if done:
             _notify(client, "Done", done, color="green")
         return True
+
+    def _announce(self, title: str, body: str, color: NotifyColor) -> None:
+        for client in list(self._server.get_clients().values()):
+            _notify(client, title, body, color=color, seconds=8.0)
 
     def _on_formation_input(self, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own refresh, not an operator
@@ -281,6 +325,46 @@ class OperatorPanel:
         self._shown_formation = view.formation
         self._d_des.value = view.formation.d_des_m
         self._h_des.value = view.formation.h_des_m
+
+    def _on_start_formation(self, event: viser.GuiEvent) -> None:
+        vehicles = self._view.vehicles
+        grounded = [v.vehicle_id for v in vehicles if v.phase == "idle" and not v.in_air]
+        found = [v.vehicle_id for v in vehicles if v.phase == "idle" and v.in_air]
+        landed = [v.vehicle_id for v in vehicles if v.phase == "landed"]
+        lines = [
+            f"MAVs {', '.join(map(str, grounded))} **take off** and fly the formation."
+            if grounded
+            else "No MAV is waiting on the ground: the flying ones resume the formation."
+        ]
+        if found:
+            lines.append(f"MAVs {', '.join(map(str, found))}, found flying, join it from where they are.")
+        if landed:
+            lines.append(f"Landed MAVs ({', '.join(map(str, landed))}) stay down until released.")
+        client = event.client
+        self._confirm(
+            client,
+            "Start formation?",
+            "  \n".join(lines),
+            "Start formation",
+            lambda: self._start_formation(client),
+            None,
+        )
+
+    def _start_formation(self, client: viser.ClientHandle | None) -> None:
+        """Start the formation; when the pre-take-off checks refuse it, offer the logged override."""
+        if self._run(client, lambda: self._actions.set_formation_enabled(True), "Formation started"):
+            return
+        held = [v for v in self._view.vehicles if v.takeoff_check and v.phase == "idle"]
+        if held:
+            self._confirm(
+                client,
+                "Start anyway?",
+                "  \n".join(f"MAV {v.vehicle_id} {v.takeoff_check}" for v in held)
+                + "  \nStarting anyway takes them off where they stand; the override is logged.",
+                "Start anyway (override)",
+                lambda: self._actions.set_formation_enabled(True, override=True),
+                "Formation started: pre-take-off checks overridden (logged)",
+            )
 
     def _on_add_obstacle(self, event: viser.GuiEvent) -> None:
         if event.client is None:
@@ -321,18 +405,8 @@ class OperatorPanel:
             f"Obstacle of radius {radius:.1f} m added at ({x:.1f}, {y:.1f}) m",
         )
 
-    def _on_land(self, event: viser.GuiEvent, vehicle_id: int) -> None:
-        self._confirm(
-            event.client,
-            f"Land MAV {vehicle_id}?",
-            f"MAV {vehicle_id} leaves the formation and lands where it is. It stays out of the "
-            "formation until you release it; its teammates re-space.",
-            f"Land MAV {vehicle_id}",
-            lambda: self._actions.land(vehicle_id),
-            f"MAV {vehicle_id} landing",
-        )
-
-    def _on_land_all(self, event: viser.GuiEvent) -> None:
+    def _on_land_all(self, event: Any) -> None:
+        """The LAND ALL button or its Shift+L shortcut (a viser command event)."""
         self._confirm(
             event.client,
             "LAND ALL?",
@@ -342,37 +416,6 @@ class OperatorPanel:
             "All MAVs landing",
         )
 
-    def _on_start(self, event: viser.GuiEvent) -> None:
-        """Start the formation; when the pre-take-off checks refuse it, offer the logged override."""
-        if self._run(event.client, lambda: self._actions.set_formation_enabled(True), "Formation started"):
-            return
-        held = [v for v in self._view.vehicles if v.takeoff_check and v.phase == "idle"]
-        if held:
-            self._confirm(
-                event.client,
-                "Start anyway?",
-                "  \n".join(f"MAV {v.vehicle_id} {v.takeoff_check}" for v in held)
-                + "  \nStarting anyway takes them off where they stand; the override is logged.",
-                "Start anyway (override)",
-                lambda: self._actions.set_formation_enabled(True, override=True),
-                "Formation started: pre-take-off checks overridden (logged)",
-            )
-
-    def _on_release(self, event: viser.GuiEvent, vehicle_id: int) -> None:
-        vehicle = next((v for v in self._view.vehicles if v.vehicle_id == vehicle_id), None)
-        check = vehicle.takeoff_check if vehicle is not None else None
-        body = f"MAV {vehicle_id} takes off again and rejoins the formation."
-        if check:
-            body = f"MAV {vehicle_id} {check}.  \nReleasing it overrides the pre-take-off check (logged)."
-        self._confirm(
-            event.client,
-            f"Release MAV {vehicle_id}?",
-            body,
-            f"Release MAV {vehicle_id}" + (" (override)" if check else ""),
-            lambda: self._actions.release(vehicle_id, override=bool(check)),
-            f"MAV {vehicle_id} released",
-        )
-
     def _confirm(
         self,
         client: viser.ClientHandle | None,
@@ -380,31 +423,39 @@ class OperatorPanel:
         body: str,
         confirm_label: str,
         action: Callable[[], object],
-        done: str,
+        done: str | None,
     ) -> None:
-        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button."""
+        """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button (then
+        notify `done`, unless None: the action tells the outcome itself). One modal per client and question:
+        asking again while it is open does not stack another."""
         if client is None:
             return
-        with client.gui.add_modal(title) as modal:
-            client.gui.add_markdown(body)
-            confirm = client.gui.add_button(confirm_label, color="red")
-            cancel = client.gui.add_button("Cancel")
+        key = (client.client_id, title)
+        with self._lock:
+            if key in self._open_modals:
+                return
+            with client.gui.add_modal(title) as modal:
+                client.gui.add_markdown(body)
+                confirm = client.gui.add_button(confirm_label, color="red")
+                cancel = client.gui.add_button("Cancel")
+            self._open_modals[key] = modal
+
+        def close() -> None:
+            with self._lock:
+                self._open_modals.pop(key, None)
+            modal.close()
 
         def on_confirm(_: viser.GuiEvent) -> None:
-            modal.close()
+            close()
             self._run(client, action, done)
 
         confirm.on_click(on_confirm)
-        cancel.on_click(lambda _: modal.close())
+        cancel.on_click(lambda _: close())
 
 
-def _plot_args(label: str, color: tuple[int, int, int]) -> tuple[tuple[np.ndarray, ...], tuple[Any, ...]]:
-    data = (np.zeros(0), np.zeros(0))
-    series = (
-        viser.uplot.Series(label="t (s)"),
-        viser.uplot.Series(label=label, stroke="rgb({},{},{})".format(*color), width=2),
-    )
-    return data, series
+def _set(handle: Any, content: str) -> None:
+    if handle.content != content:
+        handle.content = content
 
 
 def _set_range(slider: Any, low: float, high: float) -> None:
@@ -415,11 +466,11 @@ def _set_range(slider: Any, low: float, high: float) -> None:
 
 
 def _notify(
-    client: viser.ClientHandle | None, title: str, body: str, *, color: Literal["red", "green", "blue"]
+    client: viser.ClientHandle | None, title: str, body: str, *, color: NotifyColor, seconds: float = 6.0
 ) -> None:
     if client is None:
         return
     try:
-        client.add_notification(title, body, auto_close_seconds=6.0, color=color)
+        client.add_notification(title, body, auto_close_seconds=seconds, color=color)
     except Exception:  # noqa: BLE001 - the client may have gone away
         log.debug("could not notify client", exc_info=True)

@@ -8,6 +8,7 @@ frame (x east, y north, z up, metres).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Protocol
 
 import numpy as np
@@ -41,19 +42,23 @@ class AgentView:
 class VehicleView:
     """One MAV as the operator sees it.
 
-    position_m (3,) and yaw_rad (ENU) as reported by its autopilot; plan_positions_m (M, 3) its latest
-    horizon plan (M = 0 when none); phase: the mission's phase name (e.g. "formation", "landing", "landed");
-    mode: the autopilot flight mode name; link_age_s: seconds since its last telemetry (stale when
-    `link_stale`); solver_time_s: OSQP's time of the last solve (None before the first); battery_fraction in
-    [0, 1] or None when unknown; in_formation: flown by formation control in the roster now; agent: its
-    onboard agent's link (None when the agent runs in the station).
+    position_m (3,), velocity_mps (3,) and yaw_rad (ENU) as reported by its autopilot; plan_positions_m
+    (M, 3) its latest horizon plan (M = 0 when none) and plan_age_s how old that plan is (None: no plan yet);
+    phase: the mission's phase name (e.g. "formation", "holding", "landing", "landed"); mode: the autopilot
+    flight mode name; link_age_s: seconds since its last telemetry (stale when `link_stale`); solver_time_s:
+    the MPC solver's own time of the last solve (0 when the closed form solved it; None before the first);
+    battery_fraction in [0, 1] or None when unknown; in_formation: flown by formation control in the roster
+    now; distance_to_person_m: horizontal distance to the fused person estimate (None without one); released:
+    the autopilot or a pilot took it out of skyring's control; fault: the controller's last fault line (""
+    when none); agent: its onboard agent's link (None when the agent runs in the station).
 
     What the autopilot itself says (the truth when it differs from skyring's reading): autopilot_mode: its own
     mode name (PX4: "OFFBOARD", "LAND", "HOLD", "RETURN_TO_LAUNCH", ...; "" when the back-end has none);
-    failsafe: it runs one of its own failsafes now, failsafe_reason its words for it; can_arm: its pre-arm
-    checks pass (None: unknown or armed); arming_refusal: its words for the last arming or take-off it
-    refused; takeoff_check: why the ground station would not let this vehicle take off or join the formation
-    where it stands now (inside the person's keep-out, or within d_min of a teammate), None when it may.
+    failsafe: it runs one of its own failsafes now, failsafe_reason its words for it (e.g. "battery 14 % at
+    or below 15 %: landing"); can_arm: its pre-arm checks pass (None: unknown or armed); arming_refusal: its
+    words for the last arming or take-off it refused; takeoff_check: why the ground station would not let
+    this vehicle take off or join the formation where it stands now (inside the person's keep-out, or within
+    d_min of a teammate), None when it may.
     """
 
     vehicle_id: int
@@ -77,12 +82,28 @@ class VehicleView:
     arming_refusal: str | None = None
     takeoff_check: str | None = None
     agent: AgentView | None = None
+    velocity_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    plan_age_s: float | None = None
+    distance_to_person_m: float | None = None
+    released: bool = False
+    fault: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position_m", frozen_array(self.position_m, (3,), "position_m"))
+        object.__setattr__(self, "velocity_mps", frozen_array(self.velocity_mps, (3,), "velocity_mps"))
         object.__setattr__(
             self, "plan_positions_m", frozen_array(self.plan_positions_m, (-1, 3), "plan_positions_m")
         )
+
+    @property
+    def altitude_m(self) -> float:
+        """Height above the team origin's ground plane (the ENU z)."""
+        return float(self.position_m[2])
+
+    @property
+    def speed_mps(self) -> float:
+        """Norm of the reported velocity."""
+        return float(np.linalg.norm(self.velocity_mps))
 
 
 @dataclass(frozen=True)
@@ -105,6 +126,68 @@ class Range:
     high: float
 
 
+class Severity(StrEnum):
+    """How urgently an alert needs the operator: info (for the record), warning (look soon), critical (act
+    now). Ordered: `SEVERITY_RANK` gives the order."""
+
+    INFO = "info"
+    WARNING = "warning"
+    CRITICAL = "critical"
+
+
+SEVERITY_RANK = {Severity.INFO: 0, Severity.WARNING: 1, Severity.CRITICAL: 2}
+
+
+@dataclass(frozen=True)
+class Alert:
+    """One condition the operator is told about, kept in the list until the station stops.
+
+    alert_id: unique ("a1", "a2", ...); kind: what it is about (battery, separation, ...); vehicle_id: the MAV
+    it concerns (None: the whole team, e.g. the control loop); subject: what else it involves (the other MAV,
+    the trunk), "" when nothing; severity: the worst seen since it was last raised; message: the condition
+    as it stands now (or stood when it cleared); first_s / last_s: mission time it was first raised and last
+    seen holding; first_utc_s: wall time (UTC, seconds since the epoch) it was first raised, None when the
+    station has no wall clock; active: the condition still holds; acknowledged: an operator has seen it
+    (cleared when it comes back or gets worse); count: times it was raised.
+    """
+
+    alert_id: str
+    kind: str
+    vehicle_id: int | None
+    subject: str
+    severity: Severity
+    message: str
+    first_s: float
+    last_s: float
+    active: bool
+    acknowledged: bool
+    count: int = 1
+    first_utc_s: float | None = None
+
+
+@dataclass(frozen=True)
+class PaceView:
+    """How the control loop keeps up with the wall clock: requested_speed (simulated seconds per wall second
+    asked for; 1 for real vehicles), realtime_factor (achieved over the last second of wall time, None until
+    measured), capacity (the speed the last few ticks' computing time allows: a loop whose ticks take longer
+    than their period falls behind, which this shows before the achieved factor does; None until measured)
+    and fell_behind (times the loop gave up catching up since the start)."""
+
+    requested_speed: float
+    realtime_factor: float | None = None
+    fell_behind: int = 0
+    capacity: float | None = None
+
+
+@dataclass(frozen=True)
+class GeodeticOrigin:
+    """The team frame's origin: latitude and longitude (degrees, WGS-84) and altitude (m, AMSL)."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+
 @dataclass(frozen=True, eq=False)
 class SceneView:
     """Everything drawn at one instant.
@@ -114,7 +197,10 @@ class SceneView:
     estimate_source_id: the MAV whose tracker replica it comes from; tracking_error_m: mean over MAVs of
     |estimate - truth| (simulation only, else None); arena_min_m / arena_max_m (3,): the box the MAVs fly
     in; d_des_range_m / h_des_range_m / obstacle_radius_range_m: what the operator may set (the same limits
-    the ground station enforces).
+    the ground station enforces); alerts: every alert raised so far (`Alert`), most urgent first; pace: how
+    the control loop keeps up (None when not measured); utc_s: wall time of this view (UTC seconds since the
+    epoch; None in a replay without one); recording_path: the flight log being written (None: not
+    recording); origin: the team frame's geodetic origin (None when unknown, as in simulation).
     """
 
     time_s: float
@@ -132,6 +218,11 @@ class SceneView:
     estimate_source_id: int | None = None
     tracking_error_m: float | None = None
     camera: CameraView = field(default_factory=CameraView)
+    alerts: tuple[Alert, ...] = ()
+    pace: PaceView | None = None
+    utc_s: float | None = None
+    recording_path: str | None = None
+    origin: GeodeticOrigin | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "arena_min_m", frozen_array(self.arena_min_m, (3,), "arena_min_m"))
@@ -159,12 +250,23 @@ class OperatorActions(Protocol):
     def land(self, vehicle_id: int) -> None:
         """Land one MAV; it leaves formation control until released."""
 
+    def hold(self, vehicle_id: int) -> None:
+        """Stop one flying MAV where it is (it hovers out of formation control until released or landed)."""
+
     def land_all(self) -> None:
         """Land every MAV."""
 
     def release(self, vehicle_id: int, *, override: bool = False) -> None:
-        """Return a landed MAV to formation control (it takes off again), or an airborne one skyring does not
-        fly; override: let it take off or join although the pre-take-off checks refuse it (logged)."""
+        """Return a landed MAV to formation control (it takes off again), a holding one (it rejoins from where
+        it hovers), or an airborne one skyring does not fly; override: let it take off or join although the
+        pre-take-off checks refuse it (logged)."""
+
+    def acknowledge_alert(self, alert_id: str) -> None:
+        """Mark one alert as seen; it stays in the list (KeyError-like refusal for an unknown id)."""
+
+    def acknowledge_all_alerts(self) -> int:
+        """Mark every alert as seen; returns how many were newly acknowledged."""
+        ...
 
     def set_formation_enabled(self, enabled: bool, *, override: bool = False) -> object:
         """Start (True) or stop (False, hold position) formation control for the whole team; override: start

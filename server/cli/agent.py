@@ -161,8 +161,11 @@ def agent(
 
 def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_factory, calibration=None):
     from controller.params import ControllerParams
+    from controller.warmup import warm_up
     from vehicles.net.onboard import OnboardAgent
     from vehicles.net.session import Bus
+
+    warm_up(ControllerParams(method=method))  # the compiled kernels, before the agent's first tick
 
     bus = Bus(config, sender=vehicle_id, is_member=lambda s: 0 <= s <= team_size)
     try:

@@ -138,6 +138,14 @@ def experiment(
         bool, typer.Option("--quick", help="small CI profile: sweep end points, few short runs at 10 Hz")
     ] = False,
     resume: Annotated[bool, typer.Option("--resume", help="reuse finished runs already in --out")] = False,
+    cluster: Annotated[
+        str | None,
+        typer.Option(
+            help="run on an existing Dask cluster: its scheduler's address, e.g. tcp://10.0.0.5:8786 "
+            "(workers: `dask worker ADDRESS --nthreads 1` where skyring is installed); "
+            "default: local processes"
+        ),
+    ] = None,
 ) -> None:
     """Rerun the paper's simulation experiments (SE1-SE4, 3..16 MAVs, link loss, obstacles), write a report.
 
@@ -156,16 +164,21 @@ def experiment(
         raise typer.BadParameter(str(err)) from err
     jobs = jobs or os.cpu_count() or 1
     out.mkdir(parents=True, exist_ok=True)
+    where = f"the Dask cluster at {cluster}" if cluster else f"{jobs} processes"
     typer.echo(
-        f"{len(specs)} runs ({sum(s.duration_s for s in specs):.0f} simulated seconds) on {jobs} "
-        f"processes -> {out}",
+        f"{len(specs)} runs ({sum(s.duration_s for s in specs):.0f} simulated seconds) on {where} -> {out}",
         err=True,
     )
 
     start = time.monotonic()
     try:
         with RunProgress(total=len(specs), stream=sys.stderr) as progress:
-            results = exp.run_all(specs, jobs=jobs, out_dir=out, resume=resume, progress=progress)
+            results = exp.run_all(
+                specs, jobs=jobs, out_dir=out, resume=resume, progress=progress, cluster=cluster
+            )
+    except ValueError as err:  # e.g. no scheduler at the cluster address
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(code=2) from None
     except KeyboardInterrupt:
         typer.echo(
             f"\ninterrupted: the finished runs are kept under {out}; add --resume to continue", err=True

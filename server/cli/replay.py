@@ -133,7 +133,8 @@ class ReplayActions:
         raise ValueError(f"this is a replay of {self._path}: commands do not reach any vehicle")
 
     set_formation = add_obstacle = remove_obstacle = _refuse
-    land = land_all = release = set_formation_enabled = _refuse
+    land = land_all = release = set_formation_enabled = hold = _refuse
+    acknowledge_alert = acknowledge_all_alerts = _refuse
 
 
 def play(

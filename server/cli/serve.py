@@ -32,9 +32,11 @@ log = logging.getLogger(__name__)
 def build_station(settings: RunSettings):
     """A ground station over the embedded simulation of `settings`: its simulated MAVs, trees and person,
     ticking at settings.rate_hz."""
+    from controller.warmup import warm_up
     from server.station.ground_station import GroundStation, camera_view
     from vehicles.sim.scenario import build_sim
 
+    warm_up()  # the compiled kernels, before the first tick (compiles once on a fresh install)
     setup = build_sim(settings.scenario(), clock=time.perf_counter)
     return GroundStation(
         mission=setup.mission, control_period_s=1.0 / settings.rate_hz, camera=camera_view(setup.world.camera)
@@ -254,6 +256,9 @@ def run_px4(
             log_path, header=log_header(settings, command="serve --px4", speed=1.0, vehicle_urls=urls)
         )
     )
+    from controller.warmup import warm_up
+
+    warm_up()  # the compiled kernels, before the first tick (compiles once on a fresh install)
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
     try:
         stats = asyncio.run(

@@ -6,6 +6,14 @@ the sweep: a set of `SimConfig` fields) run `runs` times. Every run is an indepe
 seed is derived from (base seed, family, run index) with numpy's `SeedSequence`, so the same command gives the
 same runs in any order and with any number of workers, and run i of every condition of a family flies the
 same world (a paired comparison; see `derive_seed`).
+
+Runs go to a local process pool by default, or, for sweeps that outgrow one machine, to an existing Dask
+distributed cluster (`run_all(..., cluster="tcp://host:8786")`): its workers run the same `run_one`, so a
+run's report is the same wherever it ran (tests/server/lab/test_experiments_cluster.py checks it on a local
+cluster). Dask rather than Ray: it is pure Python from PyPI (a few MB, no native runtime to match between
+machines), a cluster is one `dask scheduler` plus `dask worker ADDRESS --nthreads 1` per core anywhere the
+project is installed, and a client needs nothing but the address; the runs are independent, CPU-bound and
+return small JSON, so a plain task queue is all the sweep needs (docs/fast-core.md, "Sweeps on a cluster").
 """
 
 from __future__ import annotations
@@ -431,6 +439,43 @@ def _stop(executor: ProcessPoolExecutor) -> None:
     executor.shutdown(wait=True, cancel_futures=True)
 
 
+def _run_on_cluster(
+    specs: Sequence[RunSpec],
+    pending: list[int],
+    *,
+    address: str,
+    simulator: str,
+    done: Callable[[int, RunResult], None],
+    timeout_s: float,
+) -> None:
+    """Run specs[i] for every i in pending on the Dask cluster at `address`; call done(i, result) as each
+    finishes. A run whose worker died comes back as a failed RunResult; Ctrl-C cancels what is left."""
+    from distributed import Client, as_completed  # imported only when a cluster is asked for
+
+    try:
+        client = Client(address, timeout=f"{timeout_s}s")
+    except OSError as err:
+        raise ValueError(f"cannot reach the Dask scheduler at {address}: {err}") from None
+    try:
+        futures = {
+            client.submit(run_one, specs[i], simulator, key=f"skyring-run-{i}-{specs[i].seed}", pure=False): i
+            for i in pending
+        }
+        try:
+            for fut in as_completed(list(futures)):
+                i = futures[fut]
+                try:
+                    result = fut.result()
+                except Exception as exc:  # the worker itself failed (killed, out of memory, lost)
+                    result = RunResult(spec=specs[i], report=None, error=f"worker failed: {exc!r}")
+                done(i, result)
+        except BaseException:
+            client.cancel(list(futures))
+            raise
+    finally:
+        client.close()
+
+
 def run_all(
     specs: Sequence[RunSpec],
     *,
@@ -439,10 +484,14 @@ def run_all(
     resume: bool = False,
     progress: ProgressCallback | None = None,
     simulator: str = SIMULATION_MODULE,
+    cluster: str | None = None,
+    cluster_timeout_s: float = 20.0,
 ) -> list[RunResult]:
     """Run every spec in worker processes (at most `jobs` at once), write each run's JSON under `out_dir` as
     it finishes, and return the results in the order of `specs`. With `resume`, finished runs already on disk
-    with the same seed and duration are reused instead of rerun."""
+    with the same seed and duration are reused instead of rerun. With `cluster` (a Dask scheduler address,
+    e.g. "tcp://10.0.0.5:8786") the runs go to that cluster's workers instead (`jobs` is then unused; a
+    scheduler not reached within cluster_timeout_s is a ValueError); the reports are the same."""
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs}")
     results: dict[int, RunResult] = {}
@@ -455,12 +504,22 @@ def run_all(
 
     pending: list[int] = []
     for i, spec in enumerate(specs):
-        done = load_run(spec, out_dir) if resume else None
-        if done is None:
+        on_disk = load_run(spec, out_dir) if resume else None
+        if on_disk is None:
             pending.append(i)
         else:
-            finished(i, done)
+            finished(i, on_disk)
     if not pending:
+        return [results[i] for i in range(total)]
+    if cluster is not None:
+
+        def written(i: int, result: RunResult) -> None:
+            write_run(result, out_dir)
+            finished(i, result)
+
+        _run_on_cluster(
+            specs, pending, address=cluster, simulator=simulator, done=written, timeout_s=cluster_timeout_s
+        )
         return [results[i] for i in range(total)]
     executor = _fresh_process_pool(jobs=min(jobs, len(pending)), simulator=simulator)
     try:

@@ -24,7 +24,7 @@ from pydantic import BaseModel, Field
 
 from server.station.commands import CommandError, UnknownTargetError
 from server.station.ground_station import GroundStation
-from webui.view import SceneView, VehicleView
+from webui.view import Alert, SceneView, VehicleView
 
 Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Override = Annotated[
@@ -73,7 +73,7 @@ class CommandOutcomeModel(BaseModel):
     """One operator command as one vehicle's agent answered it."""
 
     command_id: int
-    action: str = Field(description='"configure", "land" or "release"')
+    action: str = Field(description='"configure", "land", "hold" or "release"')
     outcome: str = Field(
         description='"pending", "acked", "refused" (message says why) or "failed" (timed out)'
     )
@@ -143,6 +143,30 @@ class CountersModel(BaseModel):
     braking_ticks: int = Field(description="ticks a MAV braked instead of applying an unsolved plan")
 
 
+class AlertModel(BaseModel):
+    """One alert (`webui.view.Alert`): persistent, time-stamped, acknowledged or not, active or cleared."""
+
+    alert_id: str
+    kind: str = Field(
+        description="battery, separation, trunk_clearance, arena, link, agent, realtime, failsafe, arming "
+        "or solver"
+    )
+    vehicle_id: int | None = Field(description="the MAV it concerns (null: the whole team)")
+    subject: str = Field(description='the other party ("MAV 3", "trunk t4"), "" when none')
+    severity: str = Field(description="info, warning or critical (the worst since it was last raised)")
+    message: str = Field(description="the condition as it stands (or stood when it cleared)")
+    first_s: float = Field(description="mission time it was first raised")
+    last_s: float = Field(description="mission time the condition last held")
+    first_utc_s: float | None = Field(description="wall time it was first raised (UTC, s since the epoch)")
+    active: bool = Field(description="the condition still holds")
+    acknowledged: bool = Field(description="an operator has seen it (cleared when it returns or worsens)")
+    count: int = Field(description="times it was raised")
+
+
+class AcknowledgedModel(BaseModel):
+    acknowledged: int = Field(description="alerts newly acknowledged")
+
+
 class StateModel(BaseModel):
     time_s: float
     formation: FormationStateModel
@@ -152,6 +176,7 @@ class StateModel(BaseModel):
     arena_min_m: Vector3
     arena_max_m: Vector3
     counters: CountersModel
+    alerts: list[AlertModel] = Field(description="every alert so far, most urgent first")
 
 
 class LandAllModel(BaseModel):
@@ -229,6 +254,23 @@ def agent_model(a) -> AgentModel:
     )
 
 
+def alert_model(alert: Alert) -> AlertModel:
+    return AlertModel(
+        alert_id=alert.alert_id,
+        kind=alert.kind,
+        vehicle_id=alert.vehicle_id,
+        subject=alert.subject,
+        severity=alert.severity.value,
+        message=alert.message,
+        first_s=alert.first_s,
+        last_s=alert.last_s,
+        first_utc_s=_num(alert.first_utc_s),
+        active=alert.active,
+        acknowledged=alert.acknowledged,
+        count=alert.count,
+    )
+
+
 def state_model(view: SceneView, *, counters: dict[str, int]) -> StateModel:
     """The JSON state snapshot: the same view the 3-D page draws."""
     estimate = None
@@ -254,11 +296,13 @@ def state_model(view: SceneView, *, counters: dict[str, int]) -> StateModel:
         arena_min_m=_vec(view.arena_min_m),
         arena_max_m=_vec(view.arena_max_m),
         counters=CountersModel(**counters),
+        alerts=[alert_model(a) for a in view.alerts],
     )
 
 
 def landing_page(*, viser_url: str) -> str:
-    """The page at /: the operator's 3-D view embedded full size, with links to it, the API and the docs."""
+    """The page at /: the operator's 3-D view embedded full size (focused, so that its keyboard shortcuts work
+    at once), with links to it, the API and the docs."""
     url = html.escape(viser_url, quote=True)
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>skyring ground station</title>
@@ -274,6 +318,11 @@ iframe {{ border: 0; width: 100%; height: calc(100% - 32px); display: block; }}
 <a id="operator-link" href="{url}" target="_blank">operator view (full window)</a>
 <a href="/docs">API docs</a><a href="/api/state">state (JSON)</a></header>
 <iframe id="operator-view" src="{url}" title="operator 3-D view"></iframe>
+<script>
+// keys go to the operator page (its Shift+L opens LAND ALL) unless the operator clicks elsewhere
+const view = document.getElementById("operator-view");
+view.addEventListener("load", () => view.focus());
+</script>
 </body></html>"""
 
 
@@ -391,13 +440,44 @@ def create_app(station: GroundStation, *, viser_port: int, ws_rate_hz: float = 2
         return _vehicle(vehicle_id)
 
     @app.post(
+        "/api/vehicles/{vehicle_id}/hold",
+        response_model=VehicleModel,
+        summary="Stop one flying MAV where it is (release gives it back to the formation)",
+        responses={
+            404: {"description": "no such vehicle"},
+            422: {"description": "not flying (on the ground, landing, or holding already)"},
+        },
+    )
+    async def hold(vehicle_id: Annotated[int, Path()]) -> VehicleModel:
+        station.hold(vehicle_id)
+        return _vehicle(vehicle_id)
+
+    @app.get("/api/alerts", response_model=list[AlertModel], summary="Every alert so far, most urgent first")
+    async def get_alerts() -> list[AlertModel]:
+        return [alert_model(a) for a in station.scene_view().alerts]
+
+    @app.post(
+        "/api/alerts/{alert_id}/acknowledge",
+        response_model=AlertModel,
+        summary="Mark one alert as seen (it stays in the list)",
+        responses={404: {"description": "no such alert"}},
+    )
+    async def acknowledge_alert(alert_id: Annotated[str, Path()]) -> AlertModel:
+        station.acknowledge_alert(alert_id)
+        return next(alert_model(a) for a in station.scene_view().alerts if a.alert_id == alert_id)
+
+    @app.post("/api/alerts/acknowledge", response_model=AcknowledgedModel, summary="Mark every alert as seen")
+    async def acknowledge_all_alerts() -> AcknowledgedModel:
+        return AcknowledgedModel(acknowledged=station.acknowledge_all_alerts())
+
+    @app.post(
         "/api/vehicles/{vehicle_id}/release",
         response_model=VehicleModel,
         responses={
             404: {"description": "no such vehicle"},
             422: {
-                "description": "not landed (nor airborne and free), in its autopilot's failsafe, no room in "
-                "the formation, or inside the person's keep-out or within d_min of a teammate"
+                "description": "not landed or holding (nor airborne and free), in its autopilot's failsafe, "
+                "no room in the formation, or inside the person's keep-out or within d_min of a teammate"
             },
         },
     )

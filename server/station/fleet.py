@@ -5,8 +5,8 @@ computing any control: the agents fly themselves. It
 
 - hears every agent's state (10 Hz) and shows an agent as lost when nothing came for `lost_after_s`;
 - turns each operator action into a command with an id: "configure" (the whole settings value: d_des, h_des,
-  formation on/off, obstacles, stamped with a revision), "land" or "release"; re-sends it every `resend_s`
-  to the agents that have not acknowledged it, and marks it failed for an agent that did not within
+  formation on/off, obstacles, stamped with a revision), "land", "hold" or "release"; re-sends it every
+  `resend_s` to the agents that have not acknowledged it, and marks it failed for an agent that did not within
   `command_timeout_s`; the outcome per vehicle (pending, acked, refused, failed) is in each vehicle's
   `AgentLink` and so in the page and the API;
 - keeps the agents' settings in step: a station that starts (or restarts) adopts the newest settings an agent
@@ -259,10 +259,22 @@ class AgentFleet:
         for vid in self._ids:
             self._land_direct(vid)
 
+    def hold(self, vehicle_id: int) -> None:
+        """Stop one flying vehicle where it is: a command to its agent (which refuses it on the ground)."""
+        phase, lost = self._vehicle(vehicle_id)
+        if phase not in FLYING_PHASES or lost:
+            state = "lost" if lost else phase.value
+            self._refuse(
+                f"vehicle {vehicle_id} is {state}; only a vehicle taking off or flying formation can be held"
+            )
+        self._send("hold", (int(vehicle_id),))
+
     def release(self, vehicle_id: int) -> None:
         phase, _ = self._vehicle(vehicle_id)
-        if phase != Phase.LANDED:
-            self._refuse(f"vehicle {vehicle_id} is {phase.value}; only a landed vehicle can be released")
+        if phase not in (Phase.LANDED, Phase.HOLDING):
+            self._refuse(
+                f"vehicle {vehicle_id} is {phase.value}; only a landed or holding vehicle can be released"
+            )
         self._send("release", (int(vehicle_id),))
 
     def snapshot(self) -> MissionSnapshot:

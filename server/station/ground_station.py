@@ -6,6 +6,10 @@ there is one path for every command. Ticks and commands are serialised by one lo
 its own threads, the API and the live runner from the asyncio loop. With a flight log attached
 (`attach_log`), every command with its outcome and a state sample every few ticks are recorded from here. The
 mission may fly any list of autopilots (the embedded simulation or PX4 vehicles): nothing here knows which.
+
+Every `alert_period_s` of mission time the station reads the alert conditions off the operator's view
+(`server.station.alert_rules`) into its alert list (`server.station.alerts.AlertBook`); the view, the API and
+the WebSocket carry that list, and acknowledging an alert is an operator command like the others.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import inspect
 import logging
 import math
 import threading
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -23,6 +28,8 @@ import numpy as np
 from controller.messages import Obstacle
 from server.flightlog.log import FlightLog
 from server.flightlog.records import LogCommand, LogSample, sample_from, scalar
+from server.station.alert_rules import AlertParams, conditions
+from server.station.alerts import AlertBook, UnknownAlertError
 from server.station.commands import (
     CommandError,
     CommandLimits,
@@ -35,12 +42,21 @@ from server.station.commands import (
 )
 from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
-from webui.view import AgentView, CameraView, Range, SceneView, VehicleView
+from vehicles.pilot import AIRBORNE_PHASES, FLYING_PHASES
+from webui.view import (
+    AgentView,
+    Alert,
+    CameraView,
+    GeodeticOrigin,
+    PaceView,
+    Range,
+    SceneView,
+    VehicleView,
+)
 
 if TYPE_CHECKING:
     from server.station.fleet import AgentFleet
 
-FLYING_PHASES = (Phase.TAKEOFF, Phase.FORMATION)
 
 log = logging.getLogger(__name__)
 
@@ -86,9 +102,14 @@ class GroundStation:
     control_period_s: seconds per tick. clock: None for a simulation (mission time starts at start_s and
     advances by exactly one control period per tick, whatever the wall clock does); real vehicles pass the
     monotonic clock their telemetry is stamped with, and each tick then runs at clock() (never going back).
-    link_stale_s: telemetry older than this is flagged stale. virtual_obstacle_height_m: height of the
-    cylinders the operator places (above the arena). on_shutdown: called after the landing commands when the
-    ground station stops (a back-end that must flush them or close links hooks in here).
+    link_stale_s: telemetry older than this is flagged stale (0.5 s: a few missed telemetry messages at
+    PX4's rates, soon enough for the alert to reach the operator within a second). virtual_obstacle_height_m:
+    height of the cylinders the operator places (above the arena). on_shutdown: called after the landing
+    commands when the ground station stops (a back-end that must flush them or close links hooks in here).
+    alert_params: the alert rules' thresholds (d_min from `limits` unless given); alert_period_s: mission
+    seconds between two readings of the alert conditions; wall_clock: UTC seconds since the epoch for the
+    operator's header and the alerts' time stamps (None: no wall time shown); origin: the team frame's
+    geodetic origin, when known.
     """
 
     def __init__(
@@ -99,10 +120,14 @@ class GroundStation:
         limits: CommandLimits | None = None,
         start_s: float = 0.0,
         clock: Callable[[], float] | None = None,
-        link_stale_s: float = 1.0,
+        link_stale_s: float = 0.5,
         virtual_obstacle_height_m: float = 12.0,
         camera: CameraView | None = None,
         on_shutdown: Callable[[], None] | None = None,
+        alert_params: AlertParams | None = None,
+        alert_period_s: float = 0.1,
+        wall_clock: Callable[[], float] | None = time.time,
+        origin: GeodeticOrigin | None = None,
     ) -> None:
         if not (math.isfinite(control_period_s) and control_period_s > 0):
             raise ValueError(f"control_period_s must be a positive number of seconds, got {control_period_s}")
@@ -121,6 +146,13 @@ class GroundStation:
         self._snapshot: MissionSnapshot | None = None
         self._view: SceneView | None = None
         self._log: FlightLog | None = None
+        self._alert_params = alert_params or AlertParams(safety_distance_m=self._limits.safety_distance_m)
+        self._alert_period_s = float(alert_period_s)
+        self._alerts = AlertBook()
+        self._alerts_read_s = -math.inf
+        self._wall_clock = wall_clock
+        self._origin = origin
+        self._pace: PaceView | None = None
 
     # ---- time ---------------------------------------------------------------------------------------------
     @property
@@ -152,6 +184,8 @@ class GroundStation:
             self._time = now
             self._changed()
             self._mission.step(now)
+            if now - self._alerts_read_s >= self._alert_period_s - 1e-9:
+                self._read_alerts(now)
             if self._log is not None and self._log.sample_due(now):
                 self._log.record_sample(self._sample)
 
@@ -162,6 +196,31 @@ class GroundStation:
         with self._lock:
             self._log = flight_log
             flight_log.record_sample(self._sample)
+
+    @property
+    def recording_path(self) -> str | None:
+        """Where the flight log is written (None: not recording)."""
+        return self._log.name if self._log is not None else None
+
+    # ---- alerts and pace ----------------------------------------------------------------------------------
+    def _read_alerts(self, now: float) -> None:
+        view = self.scene_view()
+        utc = self._wall_clock() if self._wall_clock is not None else None
+        self._alerts.update(now, conditions(view, self._alert_params), utc_s=utc)
+        self._alerts_read_s = now
+        self._view = None
+
+    @property
+    def alerts(self) -> tuple[Alert, ...]:
+        """Every alert raised so far, most urgent first."""
+        with self._lock:
+            return self._alerts.alerts
+
+    def set_pace(self, pace: PaceView | None) -> None:
+        """How the live loop keeps up with the wall clock (the live runner reports it; shown and alerted)."""
+        with self._lock:
+            self._pace = pace
+            self._view = None
 
     def _sample(self) -> LogSample:
         return sample_from(self.snapshot(), self.scene_view())
@@ -213,7 +272,15 @@ class GroundStation:
         with self._lock:
             if self._view is None:
                 self._view = scene_view(
-                    self.snapshot(), limits=self._limits, link_stale_s=self._stale_s, camera=self._camera
+                    self.snapshot(),
+                    limits=self._limits,
+                    link_stale_s=self._stale_s,
+                    camera=self._camera,
+                    alerts=self._alerts.alerts,
+                    pace=self._pace,
+                    utc_s=self._wall_clock() if self._wall_clock is not None else None,
+                    recording_path=self.recording_path,
+                    origin=self._origin,
                 )
             return self._view
 
@@ -302,10 +369,37 @@ class GroundStation:
             self._apply(lambda: self._mission.land(vehicle_id))
 
     @_recorded
-    def land_all(self) -> list[int]:
-        """Land every MAV that is taking off or flying; returns their ids."""
+    def hold(self, vehicle_id: int) -> None:
+        """Stop one flying MAV where it is: it hovers out of formation control until released or landed."""
         with self._lock:
-            flying = [v.vehicle_id for v in self.snapshot().vehicles if v.phase in FLYING_PHASES]
+            self._vehicle(vehicle_id)
+            self._apply(lambda: self._mission.hold(vehicle_id))
+
+    @_recorded
+    def acknowledge_alert(self, alert_id: str) -> None:
+        """Mark one alert as seen (it stays in the list); UnknownTargetError for an unknown id."""
+        with self._lock:
+            if not isinstance(alert_id, str):
+                self._refuse(CommandError(f"an alert id is text such as 'a3', got {alert_id!r}"))
+            try:
+                self._alerts.acknowledge(alert_id)
+            except UnknownAlertError as exc:
+                self._refuse(UnknownTargetError(str(exc)))
+            self._view = None
+
+    @_recorded
+    def acknowledge_all_alerts(self) -> int:
+        """Mark every alert as seen; returns how many were not acknowledged before."""
+        with self._lock:
+            count = self._alerts.acknowledge_all()
+            self._view = None
+            return count
+
+    @_recorded
+    def land_all(self) -> list[int]:
+        """Land every MAV that is taking off, flying, holding or found flying; returns their ids."""
+        with self._lock:
+            flying = [v.vehicle_id for v in self.snapshot().vehicles if _airborne(v)]
             self._apply(self._mission.land_all)
             return flying
 
@@ -316,11 +410,12 @@ class GroundStation:
 
         Refused if the current d_des would space the enlarged team closer than the formation spacing allows,
         or if the MAV stands inside the person's keep-out or within d_min of a teammate (`override` lets it go
-        anyway: the problems are returned and logged).
+        anyway: the problems are returned and logged). A holding MAV rejoins the formation from where it
+        hovers.
         """
         with self._lock:
             vehicle = self._vehicle(vehicle_id)
-            if vehicle.phase == Phase.LANDED:
+            if vehicle.phase in (Phase.LANDED, Phase.HOLDING):
                 team = self._team_size() + 1
                 low, high = self._limits.d_des_range_m(team)
                 d_des = self.snapshot().formation.d_des_m
@@ -442,6 +537,12 @@ def camera_view(params: CameraParams) -> CameraView:
     )
 
 
+def _airborne(v: VehicleSnapshot) -> bool:
+    """What LAND ALL lands: taking off, flying formation, holding, or found flying (idle in the air)."""
+    found_flying = v.phase == Phase.IDLE and v.autopilot is not None and v.autopilot.in_air
+    return v.phase in AIRBORNE_PHASES or found_flying
+
+
 def _positions(snap: MissionSnapshot) -> dict[int, np.ndarray]:
     """Vehicle id -> (3,) ENU position of every MAV with telemetry."""
     return {v.vehicle_id: v.autopilot.position_m for v in snap.vehicles if v.autopilot is not None}
@@ -472,12 +573,24 @@ def takeoff_checks(snap: MissionSnapshot, *, limits: CommandLimits) -> dict[int,
     )
 
 
-def vehicle_view(v: VehicleSnapshot, *, link_stale_s: float, takeoff_check: str | None = None) -> VehicleView:
+def vehicle_view(
+    v: VehicleSnapshot,
+    *,
+    link_stale_s: float,
+    now_s: float | None = None,
+    person_m: np.ndarray | None = None,
+    takeoff_check: str | None = None,
+) -> VehicleView:
     """One vehicle as the operator sees it (the autopilot's reported pose; stale when telemetry is old), with
-    what its autopilot says of itself and why it may not take off where it stands (`takeoff_check`)."""
+    what its autopilot says of itself and why it may not take off where it stands (`takeoff_check`).
+    now_s: mission time of the view, for the plan's age (None: not known); person_m (3,): where the person is
+    believed to be, for the distance to the person."""
     s = v.autopilot
     age = v.link_age_s if v.link_age_s is not None else math.inf
     plan = v.plan.positions_m if v.plan is not None else np.zeros((0, 3))
+    distance = None
+    if s is not None and person_m is not None and np.all(np.isfinite(person_m)):
+        distance = float(np.hypot(*(s.position_m[:2] - person_m[:2])))
     return VehicleView(
         vehicle_id=v.vehicle_id,
         phase=v.phase.value,
@@ -495,6 +608,11 @@ def vehicle_view(v: VehicleSnapshot, *, link_stale_s: float, takeoff_check: str 
         solver_time_s=v.solver_time_s if v.status is not None else None,
         battery_fraction=s.battery_fraction if s is not None else None,
         plan_positions_m=plan,
+        velocity_mps=s.velocity_mps if s is not None else np.zeros(3),
+        plan_age_s=max(0.0, now_s - v.plan.stamp_s) if v.plan is not None and now_s is not None else None,
+        distance_to_person_m=distance,
+        released=bool(s.released) if s is not None else False,
+        fault=v.fault or "",
         autopilot_mode=(s.autopilot_mode or s.mode.name) if s is not None else "",
         failsafe=bool(s.failsafe) if s is not None else False,
         failsafe_reason=s.failsafe_reason if s is not None else None,
@@ -527,11 +645,18 @@ def scene_view(
     limits: CommandLimits,
     link_stale_s: float = 1.0,
     camera: CameraView | None = None,
+    alerts: tuple[Alert, ...] = (),
+    pace: PaceView | None = None,
+    utc_s: float | None = None,
+    recording_path: str | None = None,
+    origin: GeodeticOrigin | None = None,
 ) -> SceneView:
     """Adapt a mission snapshot to the operator's view.
 
     The drawn estimate is the tracker replica with the smallest position-covariance trace (the best-informed
-    MAV); the tracking error is the mean over MAVs with an estimate of |estimate - truth| (simulation only).
+    MAV); the tracking error is the mean over MAVs with an estimate of |estimate - truth| (simulation only);
+    each MAV's distance to the person is measured to the drawn estimate (to the truth before there is one).
+    The rest is passed through (see `SceneView`).
     """
     estimates = [
         (v.person.position_cov_trace_m2, v.vehicle_id, v.person)
@@ -545,11 +670,18 @@ def scene_view(
         error = float(np.mean([np.linalg.norm(e[2].position_m - truth) for e in estimates]))
     team = sum(v.phase in FLYING_PHASES for v in snap.vehicles)
     d_range, h_range = limits.d_des_range_m(max(team, 1)), limits.h_des_range_m()
+    person = best[2].position_m if best else truth
     checks = takeoff_checks(snap, limits=limits)
     return SceneView(
         time_s=snap.stamp_s,
         vehicles=tuple(
-            vehicle_view(v, link_stale_s=link_stale_s, takeoff_check=checks.get(v.vehicle_id))
+            vehicle_view(
+                v,
+                link_stale_s=link_stale_s,
+                now_s=snap.stamp_s,
+                person_m=person,
+                takeoff_check=checks.get(v.vehicle_id),
+            )
             for v in snap.vehicles
         ),
         obstacles=snap.obstacles,
@@ -565,4 +697,9 @@ def scene_view(
         estimate_source_id=best[1] if best else None,
         tracking_error_m=error,
         camera=camera or CameraView(),
+        alerts=alerts,
+        pace=pace,
+        utc_s=utc_s,
+        recording_path=recording_path,
+        origin=origin,
     )

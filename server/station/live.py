@@ -2,7 +2,9 @@
 operator page beside them.
 
 `LiveRunner` advances the station `speed` simulated seconds per wall second in short batches; when the CPU
-cannot keep up it re-anchors instead of spiralling and counts it. `serve_station` runs it on a thread of its
+cannot keep up it re-anchors instead of spiralling and counts it; `LiveRunner.pace` tells how it keeps up
+(the real-time factor over the last `PACE_WINDOW_S` of wall time), which every frame hands the station for
+the operator's header and the "behind real time" alert. `serve_station` runs it on a thread of its
 own with its own event loop and clock (`ControlThread`), so neither request bodies nor WebSocket clients on
 the web's event loop can delay a control tick; viser, uvicorn and the frame publisher share the web's loop.
 It serves until stopped (SIGINT/SIGTERM or an event), then lands every MAV and closes the back-ends in a
@@ -20,13 +22,19 @@ import signal
 import socket
 import threading
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Protocol
 
 import uvicorn
 
+from webui.view import PaceView
+
 log = logging.getLogger(__name__)
+
+PACE_WINDOW_S = 1.0  # wall seconds the reported real-time factor is measured over
+CAPACITY_TICKS = 5  # ticks whose computing time the reported capacity is measured over
 
 
 class Steppable(Protocol):
@@ -84,6 +92,34 @@ class LiveRunner:
         self._clock = clock
         self._sleep = sleep
         self.stats = PaceStats()
+        self._window: deque[tuple[float, float]] = deque()  # (wall, simulated) seconds, last PACE_WINDOW_S
+        self._tick_costs: deque[float] = deque(maxlen=CAPACITY_TICKS)  # wall seconds of the last ticks
+        self._pace = PaceView(requested_speed=speed)
+
+    def pace(self) -> PaceView:
+        """The requested speed, the real-time factor achieved over the last PACE_WINDOW_S of wall time (None
+        until half a window has passed), the speed the last CAPACITY_TICKS ticks' computing time allows, and
+        the times the loop fell behind so far. Safe to call from any thread (the control loop replaces the
+        value; it never changes one)."""
+        return self._pace
+
+    def _measure(self, wall: float) -> None:
+        window = self._window
+        window.append((wall, self._station.time_s))
+        while len(window) > 2 and wall - window[1][0] >= PACE_WINDOW_S:
+            window.popleft()
+        (w0, s0), (w1, s1) = window[0], window[-1]
+        factor = (s1 - s0) / (w1 - w0) if w1 - w0 >= 0.5 * PACE_WINDOW_S else None
+        costs = self._tick_costs
+        capacity = None
+        if len(costs) == costs.maxlen and sum(costs) > 0.0:
+            capacity = len(costs) * self._station.control_period_s / sum(costs)
+        self._pace = PaceView(
+            requested_speed=self._speed,
+            realtime_factor=factor,
+            fell_behind=self.stats.lagged,
+            capacity=capacity,
+        )
 
     async def run(self, stop: asyncio.Event) -> None:
         """Tick until `stop` is set."""
@@ -104,6 +140,7 @@ class LiveRunner:
             now = self._clock()
             if now - start_wall > 0:
                 self.stats.achieved_speed = (self._station.time_s - start_sim) / (now - start_wall)
+            self._measure(now)
             if now >= next_frame:
                 self._frame()
                 next_frame = now + self._frame_period_s
@@ -111,12 +148,14 @@ class LiveRunner:
             await self._sleep(max(0.0, min(next_tick, next_frame) - self._clock()))
 
     def _tick(self) -> None:
+        start = self._clock()
         try:
             self._station.tick()
         except Exception:  # noqa: BLE001 - the live loop must survive a failing tick; it is counted and logged
             self.stats.tick_errors += 1
             if self.stats.tick_errors <= 10 or self.stats.tick_errors % 1000 == 0:
                 log.exception("control tick failed (%d so far)", self.stats.tick_errors)
+        self._tick_costs.append(self._clock() - start)
         self.stats.ticks += 1
 
     def _frame(self) -> None:
@@ -177,6 +216,12 @@ async def _publish_frames(
             log.exception("publishing a frame failed")
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(stop.wait(), timeout=period_s)
+
+
+def _publish(station, runner: LiveRunner, ui) -> None:
+    """One frame: tell the station how the loop keeps up, then draw its view."""
+    station.set_pace(runner.pace())
+    ui.publish(station.scene_view())
 
 
 def bind_port(host: str, port: int) -> tuple[socket.socket, bool]:
@@ -280,7 +325,7 @@ async def serve_station(
         control = ControlThread(runner)
         control.start()
         frames_task = asyncio.create_task(
-            _publish_frames(lambda: ui.publish(station.scene_view()), frame_period_s, stop, control)
+            _publish_frames(lambda: _publish(station, runner, ui), frame_period_s, stop, control)
         )
         stop_task = asyncio.create_task(stop.wait())
         await asyncio.wait({frames_task, serve_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)

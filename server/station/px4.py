@@ -34,6 +34,7 @@ from vehicles.px4.geodesy import GeodeticPoint
 from vehicles.sim.scenario import SeedStreams, make_person, make_trees
 from vehicles.sim.trees import TreeSpec
 from vehicles.sim.world import SimWorld, TelemetryBody
+from webui.view import GeodeticOrigin
 
 log = logging.getLogger(__name__)
 
@@ -127,7 +128,12 @@ def build_px4_station(
         formation_enabled=not holds,
         clock=time.perf_counter,
     )
-    station = GroundStation(mission=mission, control_period_s=1.0 / rate_hz)
+    ref = fleet.reference
+    station = GroundStation(
+        mission=mission,
+        control_period_s=1.0 / rate_hz,
+        origin=GeodeticOrigin(lat_deg=ref.latitude_deg, lon_deg=ref.longitude_deg, alt_m=ref.altitude_m),
+    )
     for a in fleet.autopilots:
         a.use_stamp_clock(lambda: station.time_s)
     return station

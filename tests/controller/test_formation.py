@@ -318,8 +318,9 @@ def test_obstacle_with_non_finite_centre_is_counted():
     assert out.status == SolveStatus.SOLVED and ctrl.stats.rejected_obstacles == 1
 
 
-def test_solver_failure_falls_back_to_braking():
-    stubborn = MpcParams(max_iterations=1, accept_inaccurate=False, polishing=False)
+@pytest.mark.parametrize("solver", ["osqp", "exact"])
+def test_solver_failure_falls_back_to_braking(solver):
+    stubborn = MpcParams(solver=solver, max_iterations=1, accept_inaccurate=False, polishing=False)
     ctrl = controller(mpc=stubborn)
     out = step(ctrl, state(on_circle(0.0, 12.0, 4.0), (3.0, -2.0, 0.0)))
     assert out.fault is not None

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from controller.mpc import (
+    SOLVERS,
     ModelPredictiveController,
     MpcParams,
     MpcSolution,
@@ -16,22 +17,34 @@ from controller.mpc import (
 )
 
 PARAMS = MpcParams()
+OSQP = MpcParams(solver="osqp")  # for the tests of OSQP's own behaviour (iterations, warm starts)
 N = PARAMS.horizon_steps
 STEPS = N + 1
 G = np.array([0.0, 0.0, -PARAMS.gravity_mps2])
 HOVER = np.array([0.0, 0.0, PARAMS.gravity_mps2])
 
 
-def solve(controller: ModelPredictiveController, **overrides) -> MpcSolution:
-    args = dict(
-        position_m=np.array([0.0, 0.0, 6.0]),
-        velocity_mps=np.zeros(3),
-        target_position_m=np.array([0.0, 0.0, 6.0]),
-        target_velocity_mps=np.zeros(3),
-        external_inputs_mps2=np.zeros((STEPS, 3)),
+def solve(
+    controller: ModelPredictiveController,
+    *,
+    position_m: np.ndarray | None = None,
+    velocity_mps: np.ndarray | None = None,
+    target_position_m: np.ndarray | None = None,
+    target_velocity_mps: np.ndarray | None = None,
+    external_inputs_mps2: np.ndarray | None = None,
+    terminal_position_weight: np.ndarray | None = None,
+    terminal_velocity_weight: np.ndarray | None = None,
+) -> MpcSolution:
+    """One solve of a hover problem at (0, 0, 6) m, with the given arguments replacing its parts."""
+    return controller.solve(
+        position_m=np.array([0.0, 0.0, 6.0]) if position_m is None else position_m,
+        velocity_mps=np.zeros(3) if velocity_mps is None else velocity_mps,
+        target_position_m=np.array([0.0, 0.0, 6.0]) if target_position_m is None else target_position_m,
+        target_velocity_mps=np.zeros(3) if target_velocity_mps is None else target_velocity_mps,
+        external_inputs_mps2=np.zeros((STEPS, 3)) if external_inputs_mps2 is None else external_inputs_mps2,
+        terminal_position_weight=terminal_position_weight,
+        terminal_velocity_weight=terminal_velocity_weight,
     )
-    args.update(overrides)
-    return controller.solve(**args)
 
 
 def state_space_rollout(x0: np.ndarray, inputs: np.ndarray, external: np.ndarray, dt: float) -> np.ndarray:
@@ -145,13 +158,15 @@ def random_case(rng: np.random.Generator, kind: str) -> dict:
 KINDS = ("nominal", "position_bound", "velocity_bound", "far_target", "large_force", "formation")
 
 
-@pytest.fixture(scope="module")
-def compared() -> list[tuple[str, MpcSolution, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
-    """60 seeded instances, 10 per kind, effort modes in turn; one controller per mode is reused, so the
-    solves also exercise warm starts from unrelated problems and terminal-weight updates."""
+@pytest.fixture(scope="module", params=SOLVERS)
+def compared(request) -> list[tuple[str, MpcSolution, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """60 seeded instances, 10 per kind, effort modes in turn, for each solver; one controller per mode is
+    reused, so the solves also exercise warm starts from unrelated problems and terminal-weight updates."""
     rng = np.random.default_rng(20261123)
     modes = ("hover", "planned", "raw")
-    controllers = {mode: ModelPredictiveController(MpcParams(effort=mode)) for mode in modes}
+    controllers = {
+        mode: ModelPredictiveController(MpcParams(effort=mode, solver=request.param)) for mode in modes
+    }
     results = []
     for i in range(60):
         mode = modes[i % 3]
@@ -365,7 +380,7 @@ def test_wrong_shape_raises_value_error():
 
 
 def test_solver_failure_is_not_ok_and_carries_no_numbers():
-    params = MpcParams(max_iterations=10, polishing=False, accept_inaccurate=False)
+    params = MpcParams(solver="osqp", max_iterations=10, polishing=False, accept_inaccurate=False)
     sol = solve(ModelPredictiveController(params), target_position_m=np.array([15.0, -12.0, 9.0]))
     assert not sol.ok
     assert sol.status == "maximum iterations reached"
@@ -394,7 +409,7 @@ def test_invalid_params_raise(overrides):
 @pytest.mark.parametrize("kind", ["nominal", "position_bound", "large_force"])
 def test_second_identical_solve_needs_no_more_iterations(kind):
     case = random_case(np.random.default_rng(7), kind)
-    controller = ModelPredictiveController(PARAMS)
+    controller = ModelPredictiveController(OSQP)
     first = controller.solve(**case)
     second = controller.solve(**case)
     assert first.ok and second.ok
@@ -404,21 +419,21 @@ def test_second_identical_solve_needs_no_more_iterations(kind):
 def test_receding_horizon_warm_start_saves_iterations():
     """Ticking at dt_s and starting each solve where the last plan said the MAV would be, warm starts from the
     shifted plan need far fewer iterations than solving each of the same problems cold."""
-    controller = ModelPredictiveController(PARAMS)
+    controller = ModelPredictiveController(OSQP)
     position, velocity = np.array([-12.0, 4.0, 4.0]), np.array([1.0, 0.0, 0.0])
     warm, cold = [], []
     for tick in range(20):
         angle = 0.05 * tick
-        problem = dict(
+        problem: dict[str, np.ndarray] = dict(
             position_m=position,
             velocity_mps=velocity,
             target_position_m=np.array([8.0 * np.cos(angle), 8.0 * np.sin(angle), 8.0]),
             target_velocity_mps=np.array([-np.sin(angle), np.cos(angle), 0.0]),
             external_inputs_mps2=np.tile([0.5 * np.sin(angle), 0.3, 0.0], (STEPS, 1)),
         )
-        sol = controller.solve(**problem)
+        sol = solve(controller, **problem)
         warm.append(sol.iterations)
-        cold.append(ModelPredictiveController(PARAMS).solve(**problem).iterations)
+        cold.append(solve(ModelPredictiveController(OSQP), **problem).iterations)
         position, velocity = sol.positions_m[1], sol.velocities_mps[1]
     assert sum(warm[1:]) < 0.6 * sum(cold[1:])
 
@@ -426,9 +441,9 @@ def test_receding_horizon_warm_start_saves_iterations():
 def test_reset_makes_the_next_solves_those_of_a_fresh_controller():
     rng = np.random.default_rng(3)
     cases = [random_case(rng, kind) for kind in ("nominal", "formation")]
-    fresh = ModelPredictiveController(PARAMS)
+    fresh = ModelPredictiveController(OSQP)
     expected = [fresh.solve(**case) for case in cases]
-    used = ModelPredictiveController(PARAMS)
+    used = ModelPredictiveController(OSQP)
     used.solve(**random_case(rng, "large_force"))
     used.reset()
     again = [used.solve(**case) for case in cases]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from filterpy.kalman import KalmanFilter
 from scipy import stats
 
 from controller.measurement import NoiseParams, sample_detection
@@ -374,3 +375,26 @@ def test_stats_count_each_verdict():
     tracker.update(_det(20.0, [0.0, 0.0, 0.9]))  # after expiry
     s = tracker.stats()
     assert (s.accepted, s.gated, s.stale, s.invalid, s.resets, s.out_of_order) == (3, 1, 1, 1, 1, 1)
+
+
+def test_estimate_is_filterpys_prediction_of_the_filter_state():
+    """estimate() extrapolates with a compiled kernel; it equals filterpy's own predict of the same state."""
+    rng = np.random.default_rng(11)
+    params = TrackerParams()
+    for _ in range(50):
+        tracker = PersonTracker(params)
+        a = rng.normal(size=(6, 6))
+        tracker._kf.x = rng.normal(size=(6, 1)) * 5.0
+        tracker._kf.P = a @ a.T + np.eye(6)
+        tracker._t = 1.0
+        dt = float(rng.uniform(0.001, 5.0))
+        F, Q = transition(dt_s=dt, params=params)
+        reference = KalmanFilter(dim_x=6, dim_z=3)
+        reference.x, reference.P = tracker._kf.x.copy(), tracker._kf.P.copy()
+        reference.predict(F=F, Q=Q)
+        x, P = reference.x, reference.P
+        est = tracker.estimate(1.0 + dt)
+        assert est is not None
+        np.testing.assert_allclose(est.position_m, x[:3, 0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(est.velocity_mps, x[3:, 0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(est.cov, 0.5 * (P + P.T), rtol=1e-12, atol=1e-12)

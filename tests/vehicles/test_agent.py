@@ -173,7 +173,7 @@ def test_no_phantoms_and_no_slot_when_every_teammate_is_heard():
     mates = (_plan(2, 0.0, [-4.0, 6.9, 8.9]), _plan(3, 0.0, [-4.0, -6.9, 8.9]))
     agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=mates, roster=ROSTER))
     assert spy.calls[-1]["preferred_bearing_rad"] is None
-    assert spy.calls[-1]["teammates"] == mates
+    assert tuple(spy.calls[-1]["teammates"]) == mates
 
 
 def test_a_mav_that_lost_the_person_turns_on_the_spot_to_search():

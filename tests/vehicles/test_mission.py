@@ -107,6 +107,57 @@ def test_land_all_and_release_one():
     assert phases == [Phase.FORMATION, Phase.LANDED, Phase.LANDED]
 
 
+def test_hold_stops_one_mav_where_it_is_out_of_formation_and_release_brings_it_back():
+    setup = _setup()
+    t = _in_formation(setup)
+    setup.mission.hold(2)
+    assert setup.mission.phase(2) == Phase.HOLDING
+    t = _run(setup, t, 0.1)
+    held = setup.autopilots[1]
+    assert held.state().mode == FlightMode.HOLD
+    where = held.true_position_m
+    t = _run(setup, t, 5.0)
+    assert np.linalg.norm(held.true_position_m - where) < 0.5  # hovering where it was stopped
+    snap = setup.mission.snapshot()
+    plan = snap.vehicles[1].plan
+    assert (
+        plan is not None and not plan.in_formation and snap.slot_count == 2
+    )  # teammates re-space without it
+    setup.mission.release(2)
+    _run(setup, t, 0.2)
+    assert setup.mission.phase(2) == Phase.FORMATION and held.state().mode == FlightMode.OFFBOARD
+
+
+@pytest.mark.slow  # flies the team for tens of simulated seconds
+def test_land_all_lands_a_holding_mav_too():
+    setup = _setup()
+    t = _in_formation(setup)
+    setup.mission.hold(1)
+    setup.mission.land_all()
+    assert {v.phase for v in setup.mission.snapshot().vehicles} == {Phase.LANDING}
+    _run(setup, t, 20.0)
+    assert {v.phase for v in setup.mission.snapshot().vehicles} == {Phase.LANDED}
+
+
+def test_holding_a_mav_on_the_ground_is_refused():
+    setup = _setup(formation_enabled=False)
+    _run(setup, 0.0, 0.2)
+    with pytest.raises(MissionError, match="only a vehicle taking off or flying formation can be held"):
+        setup.mission.hold(1)
+
+
+@pytest.mark.slow  # flies the team for tens of simulated seconds
+def test_a_battery_failsafe_landing_takes_the_mav_out_of_formation_and_ends_landed():
+    setup = _setup()
+    t = _in_formation(setup)
+    setup.autopilots[2].set_battery(0.15)
+    t = _run(setup, t, 0.3)
+    snap = setup.mission.snapshot()
+    assert snap.vehicles[2].phase == Phase.LANDING and snap.slot_count == 2
+    _run(setup, t, 20.0)
+    assert setup.mission.phase(3) == Phase.LANDED
+
+
 @pytest.mark.slow
 def test_changing_d_des_moves_the_team_to_the_new_distance():
     setup = _setup()
@@ -122,7 +173,7 @@ def test_changing_d_des_moves_the_team_to_the_new_distance():
     ("action", "match"),
     [
         (lambda m: m.land(99), "no vehicle with id 99"),
-        (lambda m: m.release(1), "only a landed vehicle"),
+        (lambda m: m.release(1), "only a landed or holding vehicle"),
         (lambda m: m.remove_obstacle("tree-1"), "static obstacle"),
         (lambda m: m.remove_obstacle("nope"), "no virtual obstacle"),
         (

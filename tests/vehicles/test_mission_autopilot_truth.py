@@ -28,6 +28,7 @@ class Told:
         self.overrides: dict[str, object] = {}
         self.refuse_takeoff = False
         self.takeoffs = 0
+        self.holds = 0
         self.lands = 0
 
     def state(self) -> AutopilotState | None:
@@ -45,6 +46,7 @@ class Told:
         self.sim.takeoff(height_m)
 
     def hold(self) -> None:
+        self.holds += 1
         self.sim.hold()
 
     def land(self) -> None:
@@ -163,6 +165,59 @@ def test_release_is_refused_while_the_autopilot_runs_its_failsafe():
     run(mission, t, 0.2)
     with pytest.raises(MissionError, match="failsafe.*Critical battery"):
         mission.release(3)
+
+
+def test_release_of_a_holding_mav_is_refused_while_its_autopilot_runs_a_failsafe():
+    mission, told = team()
+    t = flying(mission)
+    mission.hold(2)
+    run(mission, t, 0.2)
+    told[1].overrides = {"failsafe": True, "failsafe_reason": "Critical battery", "mode": FlightMode.HOLD}
+    run(mission, t + 0.2, 0.2)
+    with pytest.raises(MissionError, match="failsafe.*Critical battery"):
+        mission.release(2)
+    assert mission.phase(2) == Phase.HOLDING
+
+
+def test_a_holding_mav_its_autopilot_lands_is_landing_and_skyring_does_not_fight_it_with_hold():
+    mission, told = team()
+    t = flying(mission)
+    mission.hold(2)
+    assert told[1].holds == 1
+    told[1].overrides = {"mode": FlightMode.LAND, "failsafe": True}  # e.g. PX4's low-battery landing
+    t = run(mission, t, 1.5)  # within the mode grace: the Land might still be an old reading
+    assert mission.phase(2) == Phase.HOLDING and told[1].holds == 1  # the hold is not re-sent over Land
+    run(mission, t, 1.0)
+    assert mission.phase(2) == Phase.LANDING and told[1].lands == 0  # its landing stands
+
+
+def test_a_holding_mav_released_rejoins_from_the_air_and_is_re_engaged_only_if_a_pilot_took_it():
+    mission, told = team()
+    t = flying(mission)
+    mission.hold(1)
+    mission.hold(2)
+    t = run(mission, t, 0.5)
+    told[1].overrides = {"released": True, "mode": FlightMode.MANUAL}  # a pilot took MAV 2 while it held
+    t = run(mission, t, 0.2)
+    takeoffs = [a.takeoffs for a in told]
+    mission.release(1)
+    told[1].overrides = {"mode": FlightMode.HOLD}  # the pilot gives it back, hovering
+    mission.release(2)
+    run(mission, t, 0.5)
+    assert [mission.phase(1), mission.phase(2)] == [Phase.FORMATION, Phase.FORMATION]
+    assert [a.takeoffs - n for a, n in zip(told, takeoffs, strict=True)] == [0, 1, 0]
+
+
+def test_land_all_lands_a_mav_found_flying_too():
+    mission, told = team(formation_enabled=False)
+    told[0].sim.takeoff(8.9)
+    t = run(mission, 0.0, 8.0)
+    assert mission.phase(1) == Phase.IDLE and told[0].sim.in_air
+    mission.land_all()
+    assert mission.phase(1) == Phase.LANDING and told[0].lands == 1
+    assert [a.lands for a in told[1:]] == [0, 0]  # the ones on the ground are left alone
+    run(mission, t, 15.0)
+    assert mission.phase(1) == Phase.LANDED and not told[0].sim.in_air
 
 
 def test_the_roster_slots_follow_the_vehicles_in_it():

@@ -54,17 +54,12 @@ def live() -> Iterator[Live]:
     yield from _flying(seed=5)
 
 
-@pytest.fixture
-def fresh_live() -> Iterator[Live]:
-    """A live ground station of its own, flying in formation (for tests that end the flight)."""
-    yield from _flying(seed=6)
-
-
 @pytest.fixture(scope="module")
 def operator_page(live: Live, browser: Browser) -> Iterator[OpenPage]:
-    """One browser page on `live`'s landing page, shared by a module's tests that only drive the controls."""
-    from live_harness import close_page, open_page
+    """One browser page on `live`'s operator page (viser's own address, as `skyring serve` prints it),
+    shared by a module's tests that only drive the controls; the landing page has tests of its own."""
+    from live_harness import close_page, open_operator
 
-    opened = open_page(browser, live.urls.api, ui=live.ui)
+    opened = open_operator(browser, live.urls.operator, viewport=(1100, 700), ui=live.ui)
     yield opened
     close_page(opened)

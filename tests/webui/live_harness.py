@@ -18,7 +18,7 @@ from viser import transforms as tf
 from server.station.ground_station import GroundStation
 from server.station.live import Urls, serve_station
 from vehicles.mission import Phase
-from vehicles.sim.scenario import Scenario, build_sim
+from vehicles.sim.scenario import Scenario, SimSetup, build_sim
 
 RATE_HZ = 20.0  # control rate of the live station in these tests (20 Hz; the MPC's own step is 0.1 s)
 SPEED = 4.0  # simulated seconds per wall second
@@ -32,6 +32,10 @@ CHROMIUM_ARGS = [
     "--disable-sync",
     "--no-first-run",
     "--disable-quic",
+    # software WebGL on a busy machine can stall past the GPU watchdog; a killed GPU process (three in a
+    # session) would leave every later page of the session without WebGL
+    "--disable-gpu-watchdog",
+    "--disable-gpu-process-crash-limit",
 ]
 
 
@@ -43,6 +47,8 @@ class Live:
     urls: Urls
     ui: object
     stop: Callable[[], None]
+    setup: SimSetup | None = None
+    speed: float = SPEED
     pages: list[Page] = field(default_factory=list)
 
     def wait_for(self, condition: Callable[[], bool], *, sim_s: float, what: str) -> float:
@@ -51,7 +57,7 @@ class Live:
         start, wall_start = self.station.time_s, time.monotonic()
         while not condition():
             assert self.station.time_s - start < sim_s, f"{what}: not within {sim_s} s of simulated time"
-            stalled = time.monotonic() - wall_start > 5.0 * sim_s / SPEED + 10.0
+            stalled = time.monotonic() - wall_start > 5.0 * sim_s / self.speed + 10.0
             assert not stalled, f"{what}: the simulation stalled"
             time.sleep(0.05)
         return self.station.time_s - start
@@ -68,9 +74,11 @@ class Live:
         return {v.phase for v in self.station.snapshot().vehicles}
 
 
-def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thread]:
-    setup = build_sim(Scenario(vehicles=vehicles, seed=seed), clock=time.perf_counter)
-    station = GroundStation(mission=setup.mission, control_period_s=1.0 / RATE_HZ)
+def start_live(
+    *, vehicles: int = 3, seed: int = 5, speed: float = SPEED, rate_hz: float = RATE_HZ, trees: str = "paper"
+) -> tuple[Live, threading.Thread]:
+    setup = build_sim(Scenario(vehicles=vehicles, seed=seed, trees=trees), clock=time.perf_counter)
+    station = GroundStation(mission=setup.mission, control_period_s=1.0 / rate_hz)
     ready = threading.Event()
     box: dict[str, object] = {}
     loop = asyncio.new_event_loop()
@@ -89,7 +97,7 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
                     host="127.0.0.1",
                     port=0,
                     viser_port=0,
-                    speed=SPEED,
+                    speed=speed,
                     stop=stop_event,
                     on_ready=on_ready,
                     handle_signals=False,
@@ -113,7 +121,7 @@ def start_live(*, vehicles: int = 3, seed: int = 5) -> tuple[Live, threading.Thr
     def stop() -> None:
         loop.call_soon_threadsafe(stop_event.set)
 
-    live = Live(station=station, urls=urls, ui=box["ui"], stop=stop)
+    live = Live(station=station, urls=urls, ui=box["ui"], stop=stop, setup=setup, speed=speed)
     return live, thread
 
 
@@ -125,43 +133,81 @@ class OpenPage:
     console_errors: list[str]
     requests: list[str]
     client: object = None
+    embedded: bool = True
 
     @property
-    def operator(self) -> FrameLocator:
-        """The embedded viser page."""
-        return self.page.frame_locator("#operator-view")
+    def operator(self) -> FrameLocator | Page:
+        """The operator page: the landing page's embedded one (`open_page`), or the page itself
+        (`open_operator`)."""
+        return self.page.frame_locator("#operator-view") if self.embedded else self.page
 
 
-def open_page(browser: Browser, url: str, *, ui=None) -> OpenPage:
-    """Open `url` in a new context, recording console errors, page errors and every request URL; wait for the
-    operator page's canvas and controls. With the station's `ui`, also find the page's viser client (the one
-    that connected last)."""
-    context = browser.new_context(viewport={"width": 1100, "height": 700})
+def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
+    context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
     page = context.new_page()
     opened = OpenPage(page=page, console_errors=[], requests=[])
     page.on("console", lambda m: opened.console_errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: opened.console_errors.append(str(e)))
     page.on("request", lambda r: opened.requests.append(r.url))
     page.on("websocket", lambda ws: opened.requests.append(ws.url))
-    page.goto(url)
-    frame = page.frame_locator("#operator-view")
+    return opened
+
+
+SOFTWARE_GL_DPR = 0.5  # see open_operator
+
+
+def open_page(browser: Browser, url: str, *, ui=None, viewport: tuple[int, int] = (1100, 700)) -> OpenPage:
+    """Open the landing page `url` in a new context, recording console errors, page errors and every request
+    URL; wait for the embedded operator page's canvas and controls. With the station's `ui`, also find the
+    page's viser client (the one that connected last). Its 3-D view renders at full resolution (the landing
+    page is served as it is); tests that only drive the controls use `open_operator`."""
+    opened = _recording(browser, viewport)
+    opened.page.goto(url)
+    frame = opened.page.frame_locator("#operator-view")
     frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
     frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=30_000)
+    settle(opened.page)
     if ui is not None:
         opened.client = newest_client(ui)
     return opened
+
+
+def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=None) -> OpenPage:
+    """Open the operator page itself (viser's URL, as `skyring serve` prints it) full window at `viewport`,
+    recording console errors and requests; wait for its canvas and LAND ALL. The 3-D view renders at half
+    resolution (viser's `fixedDpr`; the panels are unaffected): chromium renders WebGL in software here, and
+    at full resolution on a busy two-core machine the renderer keeps the page's thread so busy that every
+    step of a test waits seconds for it."""
+    opened = _recording(browser, viewport)
+    opened.embedded = False
+    opened.page.goto(f"{url}?fixedDpr={SOFTWARE_GL_DPR}")
+    opened.page.locator("canvas").first.wait_for(state="visible", timeout=30_000)
+    opened.page.get_by_role("button", name="LAND ALL").wait_for(state="visible", timeout=30_000)
+    settle(opened.page)
+    if ui is not None:
+        opened.client = newest_client(ui)
+    return opened
+
+
+def settle(page: Page) -> None:
+    """Wait until the page draws frames again: right after loading, chromium's software WebGL compiles the
+    scene's shaders and the page answers nothing for seconds on a busy machine."""
+    page.wait_for_function(
+        "() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(true))))",
+        timeout=60_000,
+    )
 
 
 def close_page(opened: OpenPage) -> None:
     opened.page.context.close()
 
 
-def scene_canvas(frame: FrameLocator) -> Locator:
+def scene_canvas(frame: FrameLocator | Page) -> Locator:
     """The 3-D canvas of the operator page (three.js renders it; the GUI's plots are canvases too)."""
     return frame.locator('canvas[data-engine^="three.js"]')
 
 
-def number_input(frame: FrameLocator, label: str) -> Locator:
+def number_input(frame: FrameLocator | Page, label: str) -> Locator:
     """The number box of the viser slider or number input labelled `label`."""
     return frame.get_by_text(label, exact=True).locator(
         "xpath=ancestor::div[contains(@class,'mantine-Flex-root')][1]//input[contains(@class,'NumberInput-input')]"
@@ -182,3 +228,14 @@ def ground_to_canvas_fraction(camera, point_m: np.ndarray) -> tuple[float, float
     assert p[2] > 0, "the point is behind the camera"
     t = math.tan(camera.fov / 2.0)
     return 0.5 + p[0] / p[2] / (2.0 * t * camera.aspect), 0.5 + p[1] / p[2] / (2.0 * t)
+
+
+def open_tab(root: Page | FrameLocator, name: str) -> None:
+    """Show the control panel's tab `name`. By keyboard (focus, Enter): a pointer press on a tab starts
+    viser's tab drag, which a busy software-rendered page can take for a drag."""
+    from playwright.sync_api import expect
+
+    tab = root.get_by_role("tab", name=name, exact=True)
+    tab.focus()
+    tab.press("Enter")
+    expect(tab).to_have_attribute("aria-selected", "true")

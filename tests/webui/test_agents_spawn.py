@@ -106,14 +106,15 @@ def test_rehearsal_formation_holds_the_in_process_bounds_after_60_s(spawned):
 
 @pytest.mark.browser
 def test_operator_page_drives_the_agents_and_shows_their_acknowledgements(spawned, browser):
-    from live_harness import close_page, number_input, open_page
+    from live_harness import close_page, number_input, open_page, open_tab
     from playwright.sync_api import expect
 
     opened = open_page(browser, spawned.urls.api, ui=spawned.ui)
     try:
         frame = opened.operator
-        expect(frame.get_by_text("agent ok", exact=False).first).to_be_visible()
+        expect(frame.get_by_text("agent ok", exact=False).first).to_be_visible()  # the Team tab's detail
         target = spawned.agents.fleet.formation.d_des_m - 1.0
+        open_tab(frame, "Formation")
         box = number_input(frame, "d_des (m)")
         box.fill(f"{target:g}")
         box.press("Enter")
@@ -126,6 +127,7 @@ def test_operator_page_drives_the_agents_and_shows_their_acknowledgements(spawne
             assert time.monotonic() < deadline, f"the agents did not acknowledge the new d_des: {outcomes}"
             time.sleep(0.1)
         assert spawned.agents.fleet.formation.d_des_m == pytest.approx(target)
+        open_tab(frame, "Team")
         expect(frame.get_by_text("configure: acked", exact=False).first).to_be_visible()
         assert opened.console_errors == []
     finally:

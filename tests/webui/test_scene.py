@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-import dataclasses
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,9 +11,21 @@ import viser
 
 from controller.messages import Obstacle, PersonEstimate
 from controller.params import FormationParams
-from webui.panels import vehicle_card
-from webui.scene import SceneRenderer, vehicle_label
-from webui.view import Range, SceneView, VehicleView
+from webui.geometry import VEHICLE_COLORS, vehicle_color
+from webui.scene import (
+    CIRCLE_COLOR,
+    COVARIANCE_COLOR,
+    PERSON_ESTIMATE_COLOR,
+    PERSON_TRUTH_COLOR,
+    TREE_COLOR,
+    VIRTUAL_OBSTACLE_COLOR,
+    SceneRenderer,
+    ellipsoid_label,
+    vehicle_label,
+)
+from webui.view import GeodeticOrigin, Range, SceneView, VehicleView
+
+README = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def vehicle(vehicle_id: int, *, phase: str = "formation", stale: bool = False) -> VehicleView:
@@ -35,7 +48,7 @@ def vehicle(vehicle_id: int, *, phase: str = "formation", stale: bool = False) -
     )
 
 
-def view(*, obstacles=(), variances=(0.25, 0.04, 0.01)) -> SceneView:
+def view(*, obstacles=(), variances=(0.25, 0.04, 0.01), origin=None) -> SceneView:
     full = np.eye(6)
     full[:3, :3] = np.diag(variances)
     estimate = PersonEstimate(
@@ -55,6 +68,7 @@ def view(*, obstacles=(), variances=(0.25, 0.04, 0.01)) -> SceneView:
         person_estimate=estimate,
         estimate_source_id=1,
         tracking_error_m=0.5,
+        origin=origin,
     )
 
 
@@ -111,34 +125,79 @@ def test_label_shows_the_phase_of_a_mav_out_of_formation():
     assert vehicle_label(vehicle(2, phase="landing")) == "MAV 2 (landing)"
 
 
-def test_vehicle_card_shows_mode_solver_battery_and_a_stale_link():
-    card = vehicle_card(vehicle(3, stale=True))
-    assert "autopilot offboard, armed, in air" in card
-    assert "link 2.5 s **STALE**" in card and "solver 0.25 ms (solved)" in card and "battery 80 %" in card
-    assert "STALE" not in vehicle_card(vehicle(3))
+def test_the_ellipsoid_is_outlined_by_its_three_principal_ellipses_and_its_size_is_written(scene):
+    renderer = SceneRenderer(scene, sigma=2.0)
+    renderer.draw(view(variances=(0.25, 0.04, 0.01)))
+    outline = scene.get_handle_by_name("/person/covariance_outline")
+    centred = outline.points.reshape(-1, 3) - [0.5, 0.0, 0.9]
+    # every outline point lies on the 2-sigma ellipsoid: x^2/1^2 + y^2/0.4^2 + z^2/0.2^2 = 1
+    assert np.sum((centred / [1.0, 0.4, 0.2]) ** 2, axis=1) == pytest.approx(np.ones(len(centred)), abs=1e-6)
+    assert renderer.ellipsoid_axes_m is not None
+    assert sorted(renderer.ellipsoid_axes_m) == pytest.approx([0.4, 0.8, 2.0])
+    assert scene.get_handle_by_name("/person/covariance_label").text == "2\u03c3: 2.00 x 0.80 x 0.40 m"
 
 
-def test_vehicle_card_shows_the_autopilots_own_mode_and_its_failsafe_with_its_reason():
-    v = dataclasses.replace(
-        vehicle(2),
-        autopilot_mode="LAND",
-        failsafe=True,
-        failsafe_reason="Failsafe activated: switching to Land",
-    )
-    card = vehicle_card(v)
-    assert "autopilot LAND" in card
-    assert "**FAILSAFE**: Failsafe activated: switching to Land" in card
-    assert "FAILSAFE" not in vehicle_card(vehicle(2))
+def test_the_ellipsoid_is_transparent_and_the_person_markers_are_smaller_than_a_small_ellipsoid(scene):
+    SceneRenderer(scene).draw(view(variances=(0.01, 0.01, 0.01)))  # 2 sigma = 0.2 m
+    assert scene.get_handle_by_name("/person/covariance").opacity < 0.5
+    assert scene.get_handle_by_name("/person/estimate").radius < 0.2
+    assert scene.get_handle_by_name("/person/truth").radius < 0.2
 
 
-def test_vehicle_card_shows_why_the_autopilot_refused_to_arm_and_why_it_may_not_take_off_here():
-    v = dataclasses.replace(
-        vehicle(1, phase="takeoff"),
-        arming_refusal="Arming denied: Resolve system health failures first (Vehicle is in safety "
-        "configuration)",
-        takeoff_check="stands 3.0 m from the person, inside the 7.0 m keep-out (0.875 d_des)",
-    )
-    card = vehicle_card(v)
-    assert "**ARMING REFUSED**: Arming denied: Resolve system health failures first" in card
-    assert "safety configuration" in card
-    assert "**CANNOT TAKE OFF HERE**: stands 3.0 m from the person" in card
+def test_each_horizon_plan_marks_every_step_with_a_dot(scene):
+    SceneRenderer(scene).draw(view())
+    steps = scene.get_handle_by_name("/plan/1/steps")
+    assert steps.points.shape == (16, 3)  # x(1)..x(16) of the 17-point plan; x(0) is the MAV itself
+    assert steps.points == pytest.approx(vehicle(1).plan_positions_m[1:], abs=1e-3)
+
+
+def test_a_north_arrow_points_along_plus_y_and_the_origin_is_labelled_when_known(scene):
+    origin = GeodeticOrigin(lat_deg=47.397742, lon_deg=8.545594, alt_m=488.0)
+    renderer = SceneRenderer(scene)
+    renderer.draw(view())
+    shaft = scene.get_handle_by_name("/arena/north").points[0]
+    assert shaft[1, 1] - shaft[0, 1] > 2.0 and shaft[1, 0] == shaft[0, 0]
+    assert scene.get_handle_by_name("/arena/north_label").text == "N"
+    assert not scene.get_handle_by_name("/arena/origin_label").visible
+    renderer.draw(view(origin=origin))
+    label = scene.get_handle_by_name("/arena/origin_label")
+    assert label.visible and label.text == "team origin 47.397742\u00b0N 8.545594\u00b0E, 488.0 m AMSL"
+
+
+def test_sixteen_mavs_get_sixteen_distinct_colours_none_of_them_the_obstacles_or_the_person():
+    colours = [vehicle_color(i) for i in range(1, 17)]
+    assert len(set(colours)) == 16 == len(VEHICLE_COLORS)
+    reserved = {
+        TREE_COLOR,
+        VIRTUAL_OBSTACLE_COLOR,
+        PERSON_TRUTH_COLOR,
+        PERSON_ESTIMATE_COLOR,
+        COVARIANCE_COLOR,
+    }
+    assert not reserved & set(colours)
+
+
+def test_the_readme_names_the_colours_the_scene_uses():
+    text = README.read_text()
+    legend = re.search(r"Colours in the 3-D view: (.*?)\.\n", text, re.S)
+    assert legend is not None, "the README's colour legend sentence is missing"
+    said = " ".join(legend.group(1).split())
+    for phrase in (
+        "trees brown",
+        "virtual obstacles red",
+        "desired circle green",
+        "true position a light grey column",
+        "fused estimate a black ball",
+        "amber 2-sigma ellipsoid",
+        "each MAV its own colour",
+    ):
+        assert phrase in said, phrase
+    assert TREE_COLOR == (110, 80, 45) and VIRTUAL_OBSTACLE_COLOR[0] > 200 > VIRTUAL_OBSTACLE_COLOR[1] + 150
+    assert CIRCLE_COLOR[1] > CIRCLE_COLOR[0] and CIRCLE_COLOR[1] > CIRCLE_COLOR[2]  # green
+    assert len(set(PERSON_TRUTH_COLOR)) == 1 and PERSON_TRUTH_COLOR[0] > 150  # light grey
+    assert max(PERSON_ESTIMATE_COLOR) < 50  # black
+    assert COVARIANCE_COLOR[0] > 200 and COVARIANCE_COLOR[1] > 150 and COVARIANCE_COLOR[2] < 100  # amber
+
+
+def test_ellipsoid_label_lists_the_axes_largest_first():
+    assert ellipsoid_label(np.array([0.4, 1.2, 0.8]), 2.0) == "2\u03c3: 1.20 x 0.80 x 0.40 m"

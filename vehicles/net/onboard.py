@@ -45,7 +45,7 @@ from vehicles.net.guard import Received
 from vehicles.net.keys import agent_key, station_key
 from vehicles.net.session import Bus
 from vehicles.net.zenoh_links import ZenohLinks
-from vehicles.pilot import FLYING_PHASES, MissionError, MissionParams, Phase, VehiclePilot, roster_slots
+from vehicles.pilot import AIRBORNE_PHASES, MissionError, MissionParams, Phase, VehiclePilot, roster_slots
 from vehicles.pilot import takeoff_height_m as takeoff_height
 
 log = logging.getLogger(__name__)
@@ -295,7 +295,7 @@ class OnboardAgent:
                 self.vehicle_id,
                 self.params.station_timeout_s,
             )
-            if self.pilot.phase in FLYING_PHASES:
+            if self.pilot.phase in AIRBORNE_PHASES:  # a holding one too: nobody could release it
                 self.pilot.start_landing(now_s)
         self.station_lost = lost
 
@@ -343,9 +343,15 @@ class OnboardAgent:
             self._obstacles = obstacles
             return True, ""
         if body.action == "land":
-            if self.pilot.phase in (Phase.IDLE, Phase.LANDED):
+            if not self.pilot.airborne and self.pilot.phase != Phase.LANDING:
                 return True, f"on the ground already ({self.pilot.phase.value})"
             self.pilot.start_landing(now_s)
+            return True, ""
+        if body.action == "hold":
+            try:
+                self.pilot.hold(now_s)
+            except MissionError as exc:
+                return False, str(exc)
             return True, ""
         if body.action == "release":
             try:

@@ -198,9 +198,9 @@ class HeartbeatBody(_Body, frozen=True):
 
 
 class CommandBody(_Body, frozen=True):
-    """An operator command for the agents in `targets`: action "configure" (apply `settings`), "land" or
-    "release". command_id is unique per station run (with the header's boot); agents acknowledge each once
-    applied and acknowledge a re-sent one again without applying it twice."""
+    """An operator command for the agents in `targets`: action "configure" (apply `settings`), "land",
+    "hold" or "release". command_id is unique per station run (with the header's boot); agents acknowledge
+    each once applied and acknowledge a re-sent one again without applying it twice."""
 
     command_id: Annotated[int, msgspec.Meta(ge=1)]
     action: Annotated[str, msgspec.Meta(max_length=16)]

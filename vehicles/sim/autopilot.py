@@ -4,8 +4,10 @@ Physics: a double integrator whose acceleration follows the commanded one throug
 attitude loop), with PX4-like velocity and acceleration limits. Autopilot: PX4's cascaded position controller
 (position P -> velocity set-point with feed-forward -> velocity P -> acceleration), with its modes (takeoff,
 hold, offboard, land), the offboard-loss failsafe (no set-point for 0.5 s -> hold), a rate-limited yaw that
-follows the command, armed/in-air flags and a slowly draining battery. The autopilot only knows the GPS
-position, which drifts (`GpsDrift`): it flies the drifted frame, so true and reported positions differ.
+follows the command, armed/in-air flags and a slowly draining battery with PX4's kind of battery failsafe
+(at `battery_land_fraction` it lands where it is, out of skyring's control, and refuses to arm again). The
+autopilot only knows the GPS position, which drifts (`GpsDrift`): it flies the drifted frame, so true and
+reported positions differ.
 
 Gains are PX4's defaults (MPC_XY_P 0.95, MPC_XY_VEL_P_ACC 1.8, MPC_Z_P 1, MPC_Z_VEL_P_ACC 4); with the
 attitude lag they give the way-point tracking error of about 1 m the paper reports (e_max) when the set-point
@@ -15,7 +17,7 @@ accelerates at the MPC's input bound.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -49,9 +51,21 @@ class AirframeParams:
     setpoint_timeout_s: float = 0.5
     battery_flight_s: float = 1200.0  # a full battery lasts 20 min in the air
     battery_ground_s: float = 12000.0  # armed on the ground
+    battery_land_fraction: float = 0.15  # the battery failsafe: land at or below this state of charge
     physics_step_s: float = 0.01
     gravity_mps2: float = 9.81
     position_std_m: tuple[float, float, float] = (0.5, 0.5, 1.0)  # reported self-localisation std
+
+
+# a cut link is flagged lost after this long (as the PX4 back-end's Px4Config.link_lost_after_s)
+LINK_LOST_AFTER_S = 1.0
+
+
+def _with_link_lost(state: AutopilotState) -> AutopilotState:
+    return AutopilotState(
+        **{f.name: getattr(state, f.name) for f in fields(AutopilotState) if f.name != "link_lost"},
+        link_lost=True,
+    )
 
 
 def _clip_norm2(x: float, y: float, limit: float) -> tuple[float, float]:
@@ -65,8 +79,14 @@ class SimAutopilot:
     """One simulated vehicle on the ground at `start_position_m` (3,), facing `start_yaw_rad`.
 
     `advance(now_s)` integrates the physics to now_s in fixed steps; commands take effect from the next step.
-    Counters: `refused_commands` (set-points while disarmed or landing, bad takeoff heights),
-    `failsafe_holds` (offboard set-point stream lost).
+    Counters: `refused_commands` (set-points while disarmed or landing, bad takeoff heights, arming on a
+    battery at or below the failsafe level), `failsafe_holds` (offboard set-point stream lost),
+    `failsafe_landings` (battery failsafe).
+
+    Fault injection (for tests and drills; a real vehicle has no such methods): `set_battery` sets the state
+    of charge, `place_at` moves the vehicle, `cut_link` / `restore_link` make its telemetry freeze and its
+    commands vanish as over a lost radio link (the vehicle's own offboard-loss failsafe then holds it); the
+    frozen telemetry is flagged `link_lost` once it is `LINK_LOST_AFTER_S` old, as the PX4 back-end flags it.
     """
 
     def __init__(
@@ -100,11 +120,20 @@ class SimAutopilot:
         self._sp_time = -math.inf
         self._state: AutopilotState | None = None
         self._cov = frozen_array(np.diag(np.square(params.position_std_m)), (3, 3), "position_cov_m2")
+        self._failsafe = ""
+        self._arming_refused = ""
+        self._released = False
+        self._cut_state: AutopilotState | None = None
         self.refused_commands = 0
         self.failsafe_holds = 0
+        self.failsafe_landings = 0
 
     # ---- Autopilot protocol -------------------------------------------------------------------------------
     def state(self) -> AutopilotState:
+        if self._cut_state is not None:
+            if self._t - self._cut_state.stamp_s > LINK_LOST_AFTER_S and not self._cut_state.link_lost:
+                self._cut_state = _with_link_lost(self._cut_state)
+            return self._cut_state
         if self._state is None:
             off, dv = self._drift.offset_m, self._drift.velocity_mps
             roll, pitch = self._attitude()
@@ -122,10 +151,19 @@ class SimAutopilot:
                 battery_fraction=self._battery,
                 healthy=True,
                 position_cov_m2=self._cov,
+                released=self._released,
+                failsafe=bool(self._failsafe),
+                failsafe_reason=self._failsafe or None,
+                arming_refusal=self._arming_refused or None,
             )
         return self._state
 
     def send_setpoint(self, setpoint: Setpoint) -> None:
+        if self._cut_state is not None:
+            return
+        if self._released:  # the failsafe has it: set-points are ignored until it is re-engaged by a takeoff
+            self.refused_commands += 1
+            return
         if not (self._armed and self._in_air) or self._mode in (FlightMode.LAND, FlightMode.TAKEOFF):
             self.refused_commands += 1
             return
@@ -136,23 +174,38 @@ class SimAutopilot:
         self._set_mode(FlightMode.OFFBOARD)
 
     def takeoff(self, height_m: float) -> None:
+        if self._cut_state is not None:
+            return
         if not (math.isfinite(height_m) and 0.5 <= height_m <= 100.0) or self._mode == FlightMode.LAND:
             self.refused_commands += 1
             return
+        if not self._armed and self._battery <= self._p.battery_land_fraction:
+            self.refused_commands += 1
+            self._arming_refused = (
+                f"battery {self._battery * 100:.0f} % at or below the failsafe level "
+                f"{self._p.battery_land_fraction * 100:.0f} %"
+            )
+            self._state = None
+            return
         believed = self._believed()
+        self._arming_refused = ""
+        self._released = False
+        self._failsafe = ""
         self._armed = True
         self._target = [believed[0], believed[1], float(height_m)]
         self._yaw_cmd = self._yaw
         self._set_mode(FlightMode.TAKEOFF)
 
     def hold(self) -> None:
-        if not self._in_air:
+        if self._cut_state is not None or not self._in_air or self._released:
             return
         self._target = self._believed()
         self._yaw_cmd = self._yaw
         self._set_mode(FlightMode.HOLD)
 
     def land(self) -> None:
+        if self._cut_state is not None:
+            return
         if not self._in_air:
             self._armed = False
             self._set_mode(FlightMode.READY)
@@ -160,6 +213,35 @@ class SimAutopilot:
         self._target = self._believed()
         self._yaw_cmd = self._yaw
         self._set_mode(FlightMode.LAND)
+
+    # ---- fault injection ----------------------------------------------------------------------------------
+    def set_battery(self, fraction: float) -> None:
+        """Set the state of charge (0..1) at once, as a sagging or mis-reported battery would."""
+        if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
+            raise ValueError(f"battery fraction must be in [0, 1], got {fraction}")
+        self._battery = float(fraction)
+        self._state = None
+
+    def place_at(self, position_m) -> None:
+        """Move the vehicle's true position to position_m (3,) ENU, at rest (a gust, or a test's set-up)."""
+        p = np.asarray(position_m, dtype=float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)) or p[2] < 0.0:
+            raise ValueError("position_m must be three finite numbers with z >= 0")
+        self._pos = [float(p[0]), float(p[1]), float(p[2])]
+        self._vel = [0.0, 0.0, 0.0]
+        self._acc = [0.0, 0.0, 0.0]
+        self._state = None
+
+    def cut_link(self) -> None:
+        """Lose the radio link: telemetry freezes at its last reading (flagged `link_lost`) and commands no
+        longer arrive; the vehicle flies on, and its offboard-loss failsafe holds it."""
+        if self._cut_state is None:
+            self._cut_state = self.state()
+
+    def restore_link(self) -> None:
+        """Get the radio link back: fresh telemetry, commands arrive again."""
+        self._cut_state = None
+        self._state = None
 
     # ---- simulation side ----------------------------------------------------------------------------------
     @property
@@ -203,6 +285,16 @@ class SimAutopilot:
     def _set_mode(self, mode: FlightMode) -> None:
         self._mode = mode
         self._state = None
+
+    def _battery_failsafe(self) -> None:
+        """Land where it is, out of skyring's control (PX4's low-battery action): released until re-armed."""
+        self.failsafe_landings += 1
+        level = self._p.battery_land_fraction * 100
+        self._failsafe = f"battery {self._battery * 100:.0f} % at or below {level:.0f} %: landing"
+        self._released = True
+        self._target = self._believed()
+        self._yaw_cmd = self._yaw
+        self._set_mode(FlightMode.LAND)
 
     def _believed(self) -> list[float]:
         off = self._drift.offset_m
@@ -252,6 +344,8 @@ class SimAutopilot:
             self._battery = max(
                 0.0, self._battery - dt / (p.battery_flight_s if self._in_air else p.battery_ground_s)
             )
+            if self._in_air and self._battery <= p.battery_land_fraction and not self._failsafe:
+                self._battery_failsafe()
         vcmd = self._velocity_command() if self._armed else None
         if vcmd is None:
             self._acc = [0.0, 0.0, 0.0]
@@ -283,6 +377,7 @@ class SimAutopilot:
                 self._vel = [0.0, 0.0, 0.0]
                 self._acc = [0.0, 0.0, 0.0]
                 self._mode = FlightMode.READY
+                self._failsafe = ""  # the failsafe's landing is done; arming stays refused on a low battery
         if self._mode == FlightMode.TAKEOFF and abs(self._target[2] - self._believed()[2]) < 0.2:
             b = self._believed()
             self._target = [b[0], b[1], self._target[2]]

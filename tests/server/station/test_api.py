@@ -133,7 +133,8 @@ async def test_state_of_a_flying_team_has_plans_estimate_and_solver_times(flying
     for v in state["vehicles"]:
         assert v["in_air"] and v["mode"] == "offboard" and not v["link_stale"]
         assert len(v["plan_positions_m"]) == 17
-        assert v["solver_time_s"] > 0.0
+        # the solver's own time: 0 when the exact MPC's closed form solved the tick (no solver ran)
+        assert 0.0 <= v["solver_time_s"] < 0.05
     estimate = state["person"]["estimate"]
     assert estimate["position_cov_trace_m2"] == pytest.approx(np.trace(estimate["position_cov_m2"]))
     assert state["person"]["tracking_error_m"] < 1.5
@@ -386,7 +387,7 @@ async def test_releasing_a_flying_mav_is_refused_and_changes_nothing(flying):
         client_for(flying),
         "POST",
         "/api/vehicles/1/release",
-        match="only a landed vehicle, or an airborne one skyring does not fly, can be released",
+        match="only a landed or holding vehicle, or an airborne one skyring does not fly, can be released",
     )
 
 

@@ -22,7 +22,7 @@ from vehicles.mission import MissionError, Phase  # noqa: E402
 from vehicles.net import wire  # noqa: E402
 from vehicles.net.onboard import OnboardAgent, OnboardParams  # noqa: E402
 from vehicles.net.session import Bus, NetConfig  # noqa: E402
-from webui.panels import AGENT_LOST_FLAG, SKEW_FLAG, vehicle_card  # noqa: E402
+from webui.cards import AGENT_LOST_FLAG, SKEW_FLAG, vehicle_detail_markdown  # noqa: E402
 
 TEAM = "fleet"
 SKEW_S = 0.2
@@ -114,7 +114,7 @@ def test_an_agent_that_stops_is_shown_lost_within_one_second(setup):
     wait_for(lambda: link(fleet, 1)[1].lost, timeout_s=3.0)
     assert time.monotonic() - stopped < 1.0
     vehicle, _ = link(fleet, 1)
-    assert AGENT_LOST_FLAG in vehicle_card(_vehicle_view(vehicle))
+    assert AGENT_LOST_FLAG in vehicle_detail_markdown(_vehicle_view(vehicle), ())
 
 
 def test_the_clock_offset_is_measured_and_a_skew_over_50_ms_is_flagged_on_the_card(setup):
@@ -124,7 +124,7 @@ def test_the_clock_offset_is_measured_and_a_skew_over_50_ms_is_flagged_on_the_ca
     assert status.clock_offset_s == pytest.approx(SKEW_S, abs=0.02)
     view = agent_view(status)
     assert view.clock_skew
-    assert SKEW_FLAG in vehicle_card(_vehicle_view(vehicle))
+    assert SKEW_FLAG in vehicle_detail_markdown(_vehicle_view(vehicle), ())
 
 
 def test_landing_a_vehicle_on_the_ground_is_refused_and_release_needs_a_landed_one(setup):
@@ -132,10 +132,21 @@ def test_landing_a_vehicle_on_the_ground_is_refused_and_release_needs_a_landed_o
     with pytest.raises(MissionError, match="no vehicle"):
         fleet.land(7)
     wait_for(lambda: link(fleet, 1)[0].phase in (Phase.TAKEOFF, Phase.FORMATION))
-    with pytest.raises(MissionError, match="only a landed vehicle"):
+    with pytest.raises(MissionError, match="only a landed or holding vehicle"):
         fleet.release(1)
     fleet.land(1)
     wait_for(lambda: link(fleet, 1)[0].phase in (Phase.LANDING, Phase.LANDED))
+
+
+def test_hold_reaches_the_agent_and_is_refused_for_a_vehicle_that_is_not_flying(setup):
+    fleet, _ = setup
+    wait_for(lambda: link(fleet, 1)[0].phase == Phase.FORMATION)
+    fleet.hold(1)
+    wait_for(lambda: link(fleet, 1)[0].phase == Phase.HOLDING)
+    fleet.land(1)
+    wait_for(lambda: link(fleet, 1)[0].phase in (Phase.LANDING, Phase.LANDED))
+    with pytest.raises(MissionError, match="can be held"):
+        fleet.hold(1)
 
 
 def test_a_station_adopts_newer_settings_an_agent_already_flies(setup):

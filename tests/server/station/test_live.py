@@ -117,3 +117,36 @@ def test_a_busy_port_falls_back_to_a_free_one():
         sock.close()
     finally:
         taken.close()
+
+
+async def test_pace_reports_the_real_time_factor_of_the_last_second_and_the_speed_asked():
+    clock = FakeClock()
+    station = CountingStation(clock)
+    runner = LiveRunner(station=station, speed=4.0, clock=clock, sleep=clock.sleep)
+    assert runner.pace().realtime_factor is None  # nothing measured yet
+    await run_for(runner, clock, 3.0)
+    pace = runner.pace()
+    assert pace.requested_speed == 4.0
+    assert pace.realtime_factor == pytest.approx(4.0, rel=0.05)
+    assert pace.fell_behind == 0
+
+
+async def test_pace_and_capacity_drop_when_the_ticks_get_slow():
+    clock = FakeClock()
+    station = CountingStation(clock)
+    runner = LiveRunner(station=station, speed=1.0, clock=clock, sleep=clock.sleep)
+    await run_for(runner, clock, 3.0)
+    station.tick_cost_s = 0.2  # each 0.05 s tick now costs 0.2 s: a quarter of real time
+    await run_for(runner, clock, 4.2)
+    pace = runner.pace()
+    assert pace.realtime_factor == pytest.approx(0.25, abs=0.06)
+    assert pace.capacity == pytest.approx(0.25, rel=0.01)  # 0.05 s of mission per 0.2 s of computing
+    assert pace.fell_behind > 0
+
+
+async def test_capacity_shows_the_speed_the_ticks_computing_time_allows():
+    clock = FakeClock()
+    station = CountingStation(clock, tick_cost_s=0.01)  # a 0.05 s tick computed in 0.01 s: 5x at most
+    runner = LiveRunner(station=station, speed=1.0, clock=clock, sleep=clock.sleep)
+    await run_for(runner, clock, 2.0)
+    assert runner.pace().capacity == pytest.approx(5.0, rel=0.01)

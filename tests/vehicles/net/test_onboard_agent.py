@@ -178,6 +178,37 @@ def test_losing_the_station_for_the_timeout_lands_the_mav(buses):
     assert agent.station_lost and agent.phase in (Phase.LANDING, Phase.LANDED) and autopilot.landings == 1
 
 
+def test_a_hold_command_stops_a_flying_mav_and_release_brings_it_back(buses):
+    agent_bus, station = buses
+    agent, _ = make_agent(agent_bus)
+    acks: list[Received] = []
+    station.subscribe(all_agents_key(TEAM, "ack"), acks.append)
+    settings = wire.SettingsBody(rev=2, enabled=True)
+    now = time.time()
+
+    def acked(command_id: int) -> bool:
+        agent.step(now)
+        return any(ack_of(a).command_id == command_id for a in acks)
+
+    wait_for(
+        lambda: acked(1),
+        resend=lambda: station.publish(
+            station_key(TEAM, "command"), command(1, "configure", settings=settings)
+        ),
+    )
+    for _ in range(3):
+        agent.step(now)
+    assert agent.phase is Phase.FORMATION
+    wait_for(
+        lambda: acked(2), resend=lambda: station.publish(station_key(TEAM, "command"), command(2, "hold"))
+    )
+    assert agent.phase is Phase.HOLDING and [ack_of(a).accepted for a in acks if ack_of(a).command_id == 2][0]
+    wait_for(
+        lambda: acked(3), resend=lambda: station.publish(station_key(TEAM, "command"), command(3, "release"))
+    )
+    assert agent.phase is Phase.FORMATION
+
+
 def test_teammates_heard_in_formation_join_the_roster_and_silent_ones_become_obstacles(buses):
     agent_bus, teammate = buses
     agent, _ = make_agent(agent_bus, silent_after_s=1.0)

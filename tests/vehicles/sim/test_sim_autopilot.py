@@ -220,3 +220,81 @@ def test_bad_takeoff_height_is_refused():
     ap.takeoff(-3.0)
     assert ap.refused_commands == 2
     assert not ap.state().armed
+
+
+# ---- battery failsafe and fault injection -----------------------------------------------------------------
+
+
+def test_at_the_failsafe_level_the_battery_failsafe_lands_the_vehicle_out_of_skyrings_control():
+    ap, t = _airborne()
+    ap.set_battery(0.151)  # draining in the air crosses 15 % within a couple of seconds
+    t, log = _run(ap, t, 3.0)
+    s = ap.state()
+    assert s.mode == FlightMode.LAND and s.released
+    assert s.failsafe and s.failsafe_reason == "battery 15 % at or below 15 %: landing"
+    assert ap.failsafe_landings == 1
+    ap.send_setpoint(
+        Setpoint(stamp_s=t, position_m=np.array([0.0, 0.0, 9.0]), velocity_mps=np.zeros(3), yaw_rad=0.0)
+    )
+    assert ap.state().mode == FlightMode.LAND  # the failsafe has it: set-points are refused
+    t, _ = _run(ap, t, 20.0)
+    s = ap.state()
+    assert (s.in_air, s.armed, s.failsafe, s.failsafe_reason) == (False, False, False, None)
+
+
+def test_the_battery_failsafe_level_is_a_parameter():
+    ap = SimAutopilot(
+        vehicle_id=1,
+        start_position_m=(0.0, 0.0, 0.0),
+        drift=GpsDrift(np.random.default_rng(0), DriftParams(enabled=False)),
+        params=AirframeParams(battery_land_fraction=0.30),
+    )
+    ap.takeoff(8.9)
+    t, _ = _run(ap, 0.0, 12.0)
+    ap.set_battery(0.31)
+    _run(ap, t, 0.1)
+    assert not ap.state().failsafe
+    ap.set_battery(0.30)
+    _run(ap, t + 0.1, 0.1)
+    s = ap.state()
+    assert s.mode == FlightMode.LAND and s.failsafe and "at or below 30 %" in (s.failsafe_reason or "")
+
+
+def test_arming_on_a_battery_at_the_failsafe_level_is_refused_with_the_reason():
+    ap = _vehicle()
+    ap.set_battery(0.12)
+    ap.takeoff(8.9)
+    _run(ap, 0.0, 1.0)
+    s = ap.state()
+    assert not s.armed and not s.in_air
+    assert s.arming_refusal == "battery 12 % at or below the failsafe level 15 %"
+    ap.set_battery(0.9)  # a fresh battery
+    ap.takeoff(8.9)
+    _run(ap, 1.0, 1.0)
+    assert ap.state().armed and ap.state().arming_refusal is None
+
+
+def test_a_cut_link_freezes_telemetry_as_lost_and_drops_commands_until_restored():
+    ap, t = _airborne()
+    before = ap.state()
+    ap.cut_link()
+    t, _ = _run(ap, t, 0.5)
+    assert not ap.state().link_lost and ap.state().stamp_s == before.stamp_s  # frozen, not yet flagged
+    t, _ = _run(ap, t, 1.5)
+    frozen = ap.state()
+    assert frozen.link_lost and frozen.stamp_s == before.stamp_s  # flagged after 1 s, as PX4's back-end
+    ap.land()  # does not arrive
+    t, _ = _run(ap, t, 1.0)
+    assert ap.in_air
+    ap.restore_link()
+    assert not ap.state().link_lost and ap.state().stamp_s == pytest.approx(t)
+
+
+def test_place_at_moves_the_vehicle_at_rest_and_refuses_nonsense():
+    ap, _ = _airborne()
+    ap.place_at((3.0, -2.0, 7.0))
+    assert np.allclose(ap.true_position_m, (3.0, -2.0, 7.0))
+    with pytest.raises(ValueError):
+        ap.place_at((0.0, 0.0, -1.0))
+    with pytest.raises(ValueError):
+        ap.set_battery(1.5)

@@ -1,0 +1,214 @@
+"""The MPC's per-solve arithmetic as compiled kernels (numba): the condensed QP's vectors and the rollout.
+
+`mpc.py` keeps the readable numpy form of both (`ModelPredictiveController._solve_vectors`, `predict`); these
+compute the same numbers in one pass each without numpy's per-call overhead, and tests/controller/test_mpc.py
+checks them against it. Compiled code is cached on disk (`cache=True`): only the first start compiles.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from controller.qp import closed_form_kernel
+
+# solve_fast's verdicts
+CLOSED_FORM = 0  # the closed form is the optimum; the plan is written
+NEEDS_SOLVER = 1  # a row or a resting gradient fails: q, lo, hi, z, rows, gradient are written for ExactQp
+INVALID = 2  # an argument is not finite or beyond `plausible`: nothing is written
+
+
+@numba.njit(cache=True)
+def condensed_vectors(
+    free_x0: np.ndarray,
+    input_to_state: np.ndarray,
+    q_terminal: np.ndarray,
+    l_template: np.ndarray,
+    u_template: np.ndarray,
+    x0: np.ndarray,
+    reference: np.ndarray,
+    f: np.ndarray,
+    gravity: np.ndarray,
+    effort: int,
+    input_weight: float,
+    slack_weight: float,
+    q: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> None:  # pragma: no cover - compiled; tested through ModelPredictiveController
+    """Write q (n,), lo, hi (rows,) of the condensed QP (see mpc.py's module docstring).
+
+    free_x0 (6M, 6), input_to_state (6M, 3M), q_terminal (3M, 6) = 2 G_N^T W; templates (rows,) hold the
+    input box, then the state upper rows (6M), the state lower rows (6M) and the slack rows; x0, reference
+    (6,), f (M, 3), gravity (3,); effort 0 = hover (u + g), 1 = planned (u + f + g), 2 = raw (u).
+    """
+    m = f.shape[0]
+    nu = 3 * m
+    ns = 6 * m
+    acc = np.empty(nu)
+    for n in range(m):
+        for a in range(3):
+            acc[3 * n + a] = f[n, a] + gravity[a]
+    lo[:] = l_template
+    hi[:] = u_template
+    terminal = np.empty(6)
+    for r in range(ns):
+        s = 0.0
+        for j in range(6):
+            s += free_x0[r, j] * x0[j]
+        # input_to_state is block lower triangular in steps: row of step k only sees inputs of steps < k+1
+        last = 3 * (r // 6 + 1)
+        for j in range(last):
+            s += input_to_state[r, j] * acc[j]
+        hi[nu + r] -= s
+        lo[nu + ns + r] -= s
+        if r >= ns - 6:
+            terminal[r - (ns - 6)] = s - reference[r - (ns - 6)]
+    for i in range(nu):
+        if effort == 0:
+            offset = gravity[i % 3]
+        elif effort == 1:
+            offset = acc[i]
+        else:
+            offset = 0.0
+        s = 2.0 * input_weight * offset
+        for j in range(6):
+            s += q_terminal[i, j] * terminal[j]
+        q[i] = s
+    for i in range(nu, q.shape[0]):
+        q[i] = slack_weight
+
+
+@numba.njit(cache=True)
+def rollout(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    inputs: np.ndarray,
+    f: np.ndarray,
+    gravity: np.ndarray,
+    dt: float,
+    input_min: np.ndarray,
+    input_max: np.ndarray,
+    state_min: np.ndarray,
+    state_max: np.ndarray,
+    clipped: np.ndarray,
+    positions: np.ndarray,
+    velocities: np.ndarray,
+) -> float:  # pragma: no cover - compiled; tested through ModelPredictiveController
+    """Clip inputs (M, 3) into their box (into `clipped`), roll the double integrator (eq. 6) forward from
+    position, velocity (3,) into positions, velocities (M+1, 3), and return the largest state-bound excursion
+    (m or m/s; NaN when something is not finite). Same arithmetic order as mpc.predict."""
+    m = inputs.shape[0]
+    half = 0.5 * dt * dt
+    worst = -np.inf
+    for a in range(3):
+        p0 = position[a]
+        v0 = velocity[a]
+        positions[0, a] = p0
+        velocities[0, a] = v0
+        v = v0
+        acc_sum = 0.0
+        step_sum = 0.0
+        for n in range(m):
+            u = min(max(inputs[n, a], input_min[a]), input_max[a])
+            clipped[n, a] = u
+            acc = (u + f[n, a]) + gravity[a]
+            step_sum += dt * v + half * acc
+            acc_sum += acc
+            p = p0 + step_sum
+            v = v0 + dt * acc_sum
+            positions[n + 1, a] = p
+            velocities[n + 1, a] = v
+            excess = max(p - state_max[a], state_min[a] - p, v - state_max[3 + a], state_min[3 + a] - v)
+            if not (excess == excess):
+                return np.nan
+            worst = max(worst, excess)
+    return worst
+
+
+@numba.njit(cache=True)
+def solve_fast(
+    free_x0,
+    input_to_state,
+    q_terminal,
+    l_template,
+    u_template,
+    position,
+    velocity,
+    target_position,
+    target_velocity,
+    f,
+    gravity,
+    effort,
+    input_weight,
+    slack_weight,
+    plausible,
+    qp_data,
+    dt,
+    input_min,
+    input_max,
+    state_min,
+    state_max,
+    q,
+    lo,
+    hi,
+    z,
+    rows,
+    gradient,
+    inputs,
+    positions,
+    velocities,
+):  # pragma: no cover - compiled; tested through ModelPredictiveController
+    """One MPC solve's arithmetic in one call: check the arguments, build q, lo, hi (`condensed_vectors`),
+    run ExactQp's step 1 (`closed_form_kernel`, qp_data = ExactQp.kernel_data) and, when it is the optimum,
+    roll the plan out (`rollout`). Returns (verdict, largest state-bound excursion)."""
+    for arr in (position, velocity, target_position, target_velocity):
+        for i in range(3):
+            if not abs(arr[i]) <= plausible:
+                return INVALID, 0.0
+    for n in range(f.shape[0]):
+        for i in range(3):
+            if not abs(f[n, i]) <= plausible:
+                return INVALID, 0.0
+    x0 = np.empty(6)
+    reference = np.empty(6)
+    for i in range(3):
+        x0[i], x0[3 + i] = position[i], velocity[i]
+        reference[i], reference[3 + i] = target_position[i], target_velocity[i]
+    condensed_vectors(
+        free_x0,
+        input_to_state,
+        q_terminal,
+        l_template,
+        u_template,
+        x0,
+        reference,
+        f,
+        gravity,
+        effort,
+        input_weight,
+        slack_weight,
+        q,
+        lo,
+        hi,
+    )
+    gain, a, rest_idx, p_rest, tol, opt_tol = qp_data
+    if not closed_form_kernel(gain, a, rest_idx, p_rest, tol, opt_tol, q, lo, hi, z, rows, gradient):
+        return NEEDS_SOLVER, 0.0
+    m = f.shape[0]
+    violation = rollout(
+        position,
+        velocity,
+        z[: 3 * m].reshape((m, 3)),
+        f,
+        gravity,
+        dt,
+        input_min,
+        input_max,
+        state_min,
+        state_max,
+        inputs,
+        positions,
+        velocities,
+    )
+    return CLOSED_FORM, violation

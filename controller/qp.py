@@ -1,0 +1,356 @@
+"""An exact solver for the small dense QPs the MPC re-solves every control tick.
+
+    minimise   z^T P z / 2 + q^T z     subject to   l <= A z <= u   (rows: fixed ones, then per-solve extras)
+
+P is fixed at construction (it only changes with the terminal weights, and then the solver is rebuilt);
+q, l, u and the extra rows (e.g. separation half-planes whose normals move every tick) change per solve.
+
+Why not just an iterative solver: in recorded formation flights almost no bound is active (docs/fast-core.md,
+"The QP"), so the optimum is usually the unconstrained one, a fixed linear map of q. This module tries that
+first and proves it optimal, and only otherwise runs a real active-set solver (DAQP, dual active set, exact
+up to round-off), warm-started from the previous solve's active set:
+
+1. Closed form. *Resting* variables (slacks of soft rows with an exact penalty) are held at 0, the others
+   take the equality-constrained minimiser z_f = -P_ff^-1 q_f. It is the optimum exactly when the KKT
+   conditions hold with every row inactive: every row satisfied (to `feasibility_tol`) and the cost's
+   gradient on each resting variable >= 0 (its lower bound 0 is then the only active constraint, with a
+   non-negative multiplier).
+2. Per block. Variables split into independent blocks (connected through P or a fixed row; for the MPC: the
+   three axes, each with its own slacks). A block whose closed form fails is solved alone with DAQP; the
+   others keep their closed form. Extra rows that touch more than one block (coupling rows) are left out of
+   this step: the result is optimal for the problem without them (a relaxation), so if it satisfies them
+   too it is optimal for the whole problem.
+3. Whole problem. Otherwise DAQP on every variable and every row, warm-started.
+
+Resting variables must each have a fixed row that bounds them below by exactly 0 and nothing else (`rest`
+rows), so step 1's dual check is the whole KKT story. Shapes: n variables, m0 fixed rows, m1 extra rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import daqp
+import numba
+import numpy as np
+
+DAQP_INF = 1.0e30  # DAQP's own "no bound"
+STATUSES = ("solved", "infeasible", "failed")
+PATHS = ("closed_form", "blocks", "active_set")
+
+Csr = tuple[np.ndarray, np.ndarray, np.ndarray]  # (indptr, indices, values) of a sparse matrix, row by row
+
+
+@dataclass(frozen=True, eq=False)
+class QpResult:
+    """One solve. x (n,) the minimiser (NaN unless status is "solved"); status: solved, infeasible (no z
+    satisfies the rows) or failed (the active-set solver stopped, e.g. at its iteration limit); path: which
+    step of the module docstring produced x; iterations: active-set iterations (0 for the closed form)."""
+
+    x: np.ndarray
+    status: str
+    path: str
+    iterations: int
+    message: str | None = None
+    solve_time_s: float = 0.0  # DAQP's own reported time; 0 for the closed form (no clock is read here)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "solved"
+
+
+@numba.njit(cache=True)
+def closed_form_kernel(
+    gain, a, rest_idx, p_rest, tol, opt_tol, q, lo, hi, z, rows, gradient
+):  # pragma: no cover
+    """Step 1 in one compiled pass over sparse (CSR) gain, A and P's resting rows: z = gain @ q, rows = A z,
+    gradient = (P z + q)[resting]. Writes the three outputs; returns True when every row holds within tol and
+    every resting gradient is >= -opt_tol. The sparsity is the per-axis split: no product with a zero."""
+    g_ptr, g_idx, g_val = gain
+    for i in range(z.shape[0]):
+        s = 0.0
+        for k in range(g_ptr[i], g_ptr[i + 1]):
+            s += g_val[k] * q[g_idx[k]]
+        z[i] = s
+    ok = True
+    a_ptr, a_idx, a_val = a
+    for r in range(rows.shape[0]):
+        s = 0.0
+        for k in range(a_ptr[r], a_ptr[r + 1]):
+            s += a_val[k] * z[a_idx[k]]
+        rows[r] = s
+        if not (lo[r] - tol <= s <= hi[r] + tol):
+            ok = False
+    p_ptr, p_idx, p_val = p_rest
+    for r in range(rest_idx.shape[0]):
+        s = q[rest_idx[r]]
+        for k in range(p_ptr[r], p_ptr[r + 1]):
+            s += p_val[k] * z[p_idx[k]]
+        gradient[r] = s
+        if not (s >= -opt_tol):
+            ok = False
+    return ok
+
+
+def _csr(matrix: np.ndarray) -> Csr:
+    """(indptr, indices, values) of a dense matrix's non-zeros, row by row."""
+    rows, cols = np.nonzero(matrix)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=matrix.shape[0]))]).astype(np.int64)
+    return indptr, cols.astype(np.int64), np.ascontiguousarray(matrix[rows, cols], dtype=float)
+
+
+def _blocks(p: np.ndarray, a: np.ndarray) -> list[np.ndarray]:
+    """Connected components (index arrays, ascending) of the variables coupled by P or by a row of A."""
+    n = p.shape[0]
+    parent = list(range(n))
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    def join(i: int, j: int) -> None:
+        ri, rj = find(i), find(j)
+        if ri != rj:
+            parent[max(ri, rj)] = min(ri, rj)
+
+    rows, cols = np.nonzero(p)
+    for i, j in zip(rows.tolist(), cols.tolist(), strict=True):
+        join(i, j)
+    for row in a:
+        support = np.flatnonzero(row).tolist()
+        for j in support[1:]:
+            join(support[0], j)
+    roots = np.array([find(i) for i in range(n)])
+    return [np.flatnonzero(roots == r) for r in np.unique(roots)]
+
+
+class _Block:
+    """One independent block: its variables, fixed rows, closed-form map and its own DAQP workspace."""
+
+    def __init__(self, variables: np.ndarray, rows: np.ndarray, p: np.ndarray, a: np.ndarray) -> None:
+        self.variables = variables
+        self.rows = rows
+        self.p = np.ascontiguousarray(p[np.ix_(variables, variables)])
+        self.a = np.ascontiguousarray(a[np.ix_(rows, variables)])
+        self.model: daqp.Model | None = None
+
+    def solve(
+        self, q: np.ndarray, lo: np.ndarray, hi: np.ndarray, settings: dict
+    ) -> tuple[np.ndarray, int, int, float]:
+        """(x of the block, DAQP exit flag, iterations, DAQP's solve time), warm-started from this block's
+        previous solve."""
+        q_b = q[self.variables]
+        lo_b = np.maximum(lo[self.rows], -DAQP_INF)
+        hi_b = np.minimum(hi[self.rows], DAQP_INF)
+        model = self.model
+        if model is None:
+            self.model = model = daqp.Model()
+            model.settings = settings
+            model.setup(self.p, q_b, self.a, hi_b, lo_b, np.zeros(len(self.rows), dtype=np.intc))
+        else:
+            model.update(f=q_b, bupper=hi_b, blower=lo_b)
+        x, _, flag, info = model.solve()
+        return np.asarray(x, dtype=float), int(flag), int(info["iterations"]), float(info["solve_time"])
+
+
+class ExactQp:
+    """The solver of the module docstring for one fixed P (n, n) and fixed rows A (m0, n).
+
+    resting: (n,) bool, the variables held at 0 by the closed form (each needs a fixed row 0 <= z_i, alone).
+    feasibility_tol: how far (in the rows' units) a row may be violated and still count as satisfied; also
+    DAQP's primal tolerance. optimality_tol: how negative a resting variable's gradient may be.
+    """
+
+    def __init__(
+        self,
+        p: np.ndarray,
+        a: np.ndarray,
+        resting: np.ndarray,
+        *,
+        feasibility_tol: float = 1.0e-9,
+        optimality_tol: float = 1.0e-9,
+        iteration_limit: int = 1000,
+    ) -> None:
+        p = np.array(p, dtype=float)
+        a = np.array(a, dtype=float)
+        resting = np.asarray(resting, dtype=bool)
+        n = p.shape[0]
+        if p.shape != (n, n) or a.ndim != 2 or a.shape[1] != n or resting.shape != (n,):
+            raise ValueError(f"shapes: P {p.shape}, A {a.shape}, resting {resting.shape} do not agree")
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(a))):
+            raise ValueError("P and A must be finite")
+        if np.max(np.abs(p - p.T)) > 1e-12 * max(1.0, float(np.max(np.abs(p)))):
+            raise ValueError("P must be symmetric")
+        free = ~resting
+        p_ff = p[np.ix_(free, free)]
+        try:
+            chol = np.linalg.cholesky(p_ff)
+        except np.linalg.LinAlgError:
+            raise ValueError("P restricted to the non-resting variables must be positive definite") from None
+        for i in np.flatnonzero(resting):
+            alone = (a[:, i] != 0.0) & (np.count_nonzero(a, axis=1) == 1)
+            if not alone.any():
+                raise ValueError(f"resting variable {i} needs a fixed row that bounds it alone")
+        self.n = n
+        self._p = p
+        self._a = a
+        self._resting = resting
+        self._rest_idx = np.flatnonzero(resting)
+        # z = gain @ q: -P_ff^-1 on the free variables, 0 on the resting ones.
+        inv_ff = np.linalg.inv(chol).T @ np.linalg.inv(chol)
+        gain = np.zeros((n, n))
+        gain[np.ix_(free, free)] = -inv_ff
+        self._gain = gain
+        self._gain_csr = _csr(gain)
+        self._a_csr = _csr(a)
+        self._p_rest_csr = _csr(p[resting])
+        self._tol = float(feasibility_tol)
+        self._opt_tol = float(optimality_tol)
+        self._settings = {"primal_tol": float(feasibility_tol), "iter_limit": int(iteration_limit)}
+        row_block = np.full(a.shape[0], -1)
+        blocks = []
+        for b, variables in enumerate(_blocks(p, a)):
+            in_block = np.zeros(n, dtype=bool)
+            in_block[variables] = True
+            rows = np.flatnonzero(np.any(a[:, in_block] != 0.0, axis=1))
+            row_block[rows] = b
+            blocks.append(_Block(variables, rows, p, a))
+        self._blocks = blocks
+        self._var_block = np.empty(n, dtype=int)
+        for b, block in enumerate(blocks):
+            self._var_block[block.variables] = b
+        self._full: daqp.Model | None = None
+        self._full_rows = -1
+
+    @property
+    def block_count(self) -> int:
+        return len(self._blocks)
+
+    def closed_form(self, q: np.ndarray) -> np.ndarray:
+        """(n,) step 1's candidate for q (n,): -P_ff^-1 q_f on the free variables, 0 on the resting ones."""
+        return self._gain @ q
+
+    @property
+    def kernel_data(self) -> tuple[Csr, Csr, np.ndarray, Csr, float, float]:
+        """The leading arguments of `closed_form_kernel` for this problem (sparse gain, A, resting rows of P,
+        tolerances), for callers that run step 1 inside their own compiled code and then call `finish`."""
+        return (self._gain_csr, self._a_csr, self._rest_idx, self._p_rest_csr, self._tol, self._opt_tol)
+
+    @property
+    def row_count(self) -> int:
+        return self._a.shape[0]
+
+    @property
+    def resting_count(self) -> int:
+        return self._rest_idx.shape[0]
+
+    def solve(
+        self,
+        q: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        extra_a: np.ndarray | None = None,
+        extra_lo: np.ndarray | None = None,
+        extra_hi: np.ndarray | None = None,
+    ) -> QpResult:
+        """Minimise for q (n,), fixed-row bounds lo, hi (m0,) and optional extra rows (m1, n) with bounds
+        (m1,). Bounds may be +-inf. Returns the exact minimiser (to DAQP's tolerances when step 2 or 3
+        ran)."""
+        z = np.empty(self.n)
+        rows = np.empty(self._a.shape[0])
+        gradient = np.empty(self._rest_idx.shape[0])
+        ok = closed_form_kernel(*self.kernel_data, q, lo, hi, z, rows, gradient)
+        return self.finish(q, lo, hi, ok, z, rows, gradient, extra_a, extra_lo, extra_hi)
+
+    def finish(
+        self,
+        q: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        closed_form_ok: bool,
+        z: np.ndarray,
+        rows: np.ndarray,
+        gradient: np.ndarray,
+        extra_a: np.ndarray | None = None,
+        extra_lo: np.ndarray | None = None,
+        extra_hi: np.ndarray | None = None,
+    ) -> QpResult:
+        """Steps 2 and 3 after step 1 ran (`closed_form_kernel`: its verdict and its outputs z (n,), rows
+        (m0,), gradient (resting,), which this may overwrite); the extra rows are checked here."""
+        tol = self._tol
+        ok = closed_form_ok
+        extra = extra_a is not None and extra_a.shape[0] > 0
+        if extra and ok:
+            assert extra_a is not None and extra_lo is not None and extra_hi is not None
+            extra_rows = extra_a @ z
+            ok = not ((extra_rows < extra_lo - tol) | (extra_rows > extra_hi + tol)).any()
+        if ok:
+            return QpResult(x=z, status="solved", path="closed_form", iterations=0)
+        bad_rows = (rows < lo - tol) | (rows > hi + tol)
+        bad_rest = ~(gradient >= -self._opt_tol)
+
+        # Step 2: re-solve only the blocks whose own rows or resting variables fail.
+        failing = set(self._var_block[self._rest_idx[bad_rest]].tolist())
+        for b, block in enumerate(self._blocks):
+            if b not in failing and bad_rows[block.rows].any():
+                failing.add(b)
+        iterations, time_s = 0, 0.0
+        coupling_ok = True
+        for b in sorted(failing):
+            block = self._blocks[b]
+            x_b, flag, its, t_s = block.solve(q, lo, hi, self._settings)
+            iterations += its
+            time_s += t_s
+            if flag < 0:
+                return self._failed(flag, iterations)
+            z[block.variables] = x_b
+        if extra:
+            assert extra_a is not None and extra_lo is not None and extra_hi is not None
+            extra_rows = extra_a @ z
+            coupling_ok = not ((extra_rows < extra_lo - tol) | (extra_rows > extra_hi + tol)).any()
+        if coupling_ok and failing:
+            return QpResult(x=z, status="solved", path="blocks", iterations=iterations, solve_time_s=time_s)
+
+        # Step 3: everything at once.
+        a_all, lo_all, hi_all = self._a, lo, hi
+        if extra:
+            assert extra_a is not None and extra_lo is not None and extra_hi is not None
+            a_all = np.vstack([self._a, extra_a])
+            lo_all = np.concatenate([lo, extra_lo])
+            hi_all = np.concatenate([hi, extra_hi])
+        lo_all = np.maximum(lo_all, -DAQP_INF)
+        hi_all = np.minimum(hi_all, DAQP_INF)
+        full = self._full
+        if full is None or self._full_rows != a_all.shape[0]:
+            self._full = full = daqp.Model()
+            full.settings = self._settings
+            full.setup(
+                self._p, q, a_all, hi_all, lo_all, np.zeros(a_all.shape[0], dtype=np.intc), primal_start=z
+            )
+            self._full_rows = a_all.shape[0]
+        else:
+            full.update(f=q, A=a_all, bupper=hi_all, blower=lo_all)
+        x, _, flag, info = full.solve()
+        iterations += int(info["iterations"])
+        time_s += float(info["solve_time"])
+        if flag < 0:
+            return self._failed(flag, iterations)
+        return QpResult(
+            x=np.asarray(x, dtype=float),
+            status="solved",
+            path="active_set",
+            iterations=iterations,
+            solve_time_s=time_s,
+        )
+
+    def _failed(self, flag: int, iterations: int) -> QpResult:
+        status = "infeasible" if flag == -1 else "failed"
+        return QpResult(
+            x=np.full(self.n, np.nan),
+            status=status,
+            path="active_set",
+            iterations=iterations,
+            message=f"DAQP exit flag {flag}",
+        )

@@ -1,0 +1,248 @@
+"""The teammates' latest horizon plans, kept in preallocated arrays updated when a plan arrives.
+
+`fields.teammate_paths` builds the same `TeammatePaths` from a list of plans, stacking and checking every plan
+again on every tick; at 100 Hz that re-does for each tick what only changes when a message arrives (10 Hz per
+teammate). `TeammateTable` checks a plan once, on arrival, stores it in a row of fixed arrays (rows in vehicle
+id order, the order `teammate_paths` sees them in), and per tick aligns the fresh rows to our horizon with one
+compiled kernel. Same numbers as `teammate_paths` (tests/controller/test_teammates.py).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numba
+import numpy as np
+
+from controller.fields import SANE_ABS, FieldParams, TeammatePaths, covariance_radius_m, teammate_paths
+from controller.messages import HorizonPlan
+
+
+@numba.njit(cache=True)
+def align_rows(
+    positions, lengths, stamps, plan_dts, rows, now_s, dt_s, current_only, out
+):  # pragma: no cover - compiled; tested against fields._aligned
+    """out[i] (steps, 3) = plan rows[i] (positions (R, L, 3), valid length lengths[row]) sampled at our times
+    now_s + n dt_s: shifted by its age and linearly interpolated, held before x(0) and after its end (the
+    arithmetic of fields._aligned); current_only holds x(0) over the horizon (the price baseline)."""
+    steps = out.shape[1]
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        last = lengths[r] - 1
+        for n in range(steps):
+            if current_only:
+                lo, hi, a = 0, 0, 0.0
+            else:
+                t = now_s + dt_s * n
+                k = (t - stamps[r]) / plan_dts[r]
+                if k < 0.0:
+                    k = 0.0
+                elif k > last:
+                    k = float(last)
+                lo = min(int(k), last)
+                hi = min(lo + 1, last)
+                a = k - lo
+            for c in range(3):
+                out[i, n, c] = (1.0 - a) * positions[r, lo, c] + a * positions[r, hi, c]
+
+
+class TeammateView:
+    """What the formation controller gets of a `TeammateTable` for one tick: the plans stamped at or after
+    since_s, then the extra plans (the agent's phantoms, stand-ins for unheard teammates)."""
+
+    __slots__ = ("table", "since_s", "extra")
+
+    def __init__(self, table: TeammateTable, since_s: float, extra: Sequence[HorizonPlan] = ()) -> None:
+        self.table = table
+        self.since_s = since_s
+        self.extra = extra
+
+    def plans(self) -> tuple[HorizonPlan, ...]:
+        """The plans this view stands for, as messages: the fresh stored ones by id, then the extra ones."""
+        fresh = tuple(p for p in self.table.plans() if p.stamp_s >= self.since_s)
+        return fresh + tuple(self.extra)
+
+    def __iter__(self):
+        return iter(self.plans())
+
+    def paths(
+        self,
+        *,
+        now_s: float,
+        dt_s: float,
+        steps: int,
+        own_cov_radius_m: float,
+        params: FieldParams,
+        current_position_only: bool = False,
+    ) -> TeammatePaths:
+        return self.table.paths(
+            now_s=now_s,
+            dt_s=dt_s,
+            steps=steps,
+            since_s=self.since_s,
+            own_cov_radius_m=own_cov_radius_m,
+            params=params,
+            extra=self.extra,
+            current_position_only=current_position_only,
+        )
+
+
+class TeammateTable:
+    """The latest plan of each teammate of MAV `own_id`, checked once and kept in arrays.
+
+    `update(plan)` stores a plan (or refuses it: False); `paths(...)` gives the `TeammatePaths` of the plans
+    not older than a limit, plus optional extra plans (the agent's phantoms), for the formation controller.
+    """
+
+    _COLUMNS = ("_positions", "_lengths", "_stamps", "_dts", "_radii", "_in_formation", "_row_ids")
+
+    def __init__(self, *, own_id: int, plan_length: int, capacity: int = 16) -> None:
+        self._own = int(own_id)
+        self._plans: dict[int, HorizonPlan] = {}
+        self._count = 0
+        capacity, length = max(int(capacity), 1), max(int(plan_length), 2)
+        # Row r holds one teammate's latest plan: positions (capacity, length, 3), its valid length, stamp,
+        # step, covariance radius, in-formation flag and vehicle id; rows sorted by vehicle id.
+        self._positions = np.zeros((capacity, length, 3))
+        self._lengths = np.zeros(capacity, dtype=np.int64)
+        self._stamps = np.zeros(capacity)
+        self._dts = np.ones(capacity)
+        self._radii = np.zeros(capacity)
+        self._in_formation = np.zeros(capacity, dtype=np.bool_)
+        self._row_ids = np.zeros(capacity, dtype=np.int64)
+
+    def _grow(self, capacity: int, length: int) -> None:
+        """Re-allocate every column for `capacity` rows of `length` states, keeping the stored rows."""
+        old = self._count
+        positions = np.zeros((capacity, length, 3))
+        positions[:old, : self._positions.shape[1]] = self._positions[:old]
+        self._positions = positions
+        for name in self._COLUMNS[1:]:
+            column = getattr(self, name)
+            fill = np.ones if name == "_dts" else np.zeros
+            grown = fill(capacity, dtype=column.dtype)
+            grown[:old] = column[:old]
+            setattr(self, name, grown)
+
+    @property
+    def count(self) -> int:
+        return self._count
+
+    def plans(self) -> tuple[HorizonPlan, ...]:
+        """The stored plans, by vehicle id."""
+        return tuple(self._plans[int(v)] for v in self._row_ids[: self._count])
+
+    def view(self, since_s: float, extra: Sequence[HorizonPlan] = ()) -> TeammateView:
+        return TeammateView(self, since_s, extra)
+
+    def fresh_ids(self, since_s: float) -> set[int]:
+        """Vehicle ids of the in-formation plans stamped at or after since_s."""
+        n = self._count
+        fresh = (self._stamps[:n] >= since_s) & self._in_formation[:n]
+        return set(self._row_ids[:n][fresh].tolist())
+
+    def update(self, plan: HorizonPlan) -> str:
+        """Store `plan` as its teammate's latest: "stored"; "older" (an older plan than the stored one, not an
+        error: nothing changes); "refused" (ours, or unusable: non-finite or beyond 1000 km numbers, a
+        non-positive step, fewer than 2 states)."""
+        vid = int(plan.vehicle_id)
+        positions, cov = plan.positions_m, plan.position_cov_m2
+        if (
+            vid == self._own
+            or not (math.isfinite(plan.stamp_s) and math.isfinite(plan.dt_s) and plan.dt_s > 0.0)
+            or positions.shape[0] < 2
+            or not float(np.abs(positions).max()) < SANE_ABS
+            or not float(np.abs(cov).max()) < SANE_ABS
+        ):
+            return "refused"
+        old = self._plans.get(vid)
+        if old is not None and plan.stamp_s < old.stamp_s:
+            return "older"
+        rows = self._row_ids[: self._count]
+        row = int(np.searchsorted(rows, vid))
+        if old is None:
+            if self._count == self._positions.shape[0]:
+                self._grow(2 * self._count, self._positions.shape[1])
+            for name in self._COLUMNS:
+                arr = getattr(self, name)
+                arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
+            self._count += 1
+        length = positions.shape[0]
+        if length > self._positions.shape[1]:
+            self._grow(self._positions.shape[0], length)
+        if old is None or old.position_cov_m2 is not cov:  # the sender's covariance rarely changes
+            self._radii[row] = covariance_radius_m(cov)
+        self._plans[vid] = plan
+        self._row_ids[row] = vid
+        self._positions[row, :length] = positions
+        self._lengths[row] = length
+        self._stamps[row] = plan.stamp_s
+        self._dts[row] = plan.dt_s
+        self._in_formation[row] = plan.in_formation
+        return "stored"
+
+    def fresh_count(self, since_s: float, *, in_formation: bool = True) -> int:
+        """How many stored plans are stamped at or after since_s (only in-formation ones by default)."""
+        n = self._count
+        fresh = self._stamps[:n] >= since_s
+        if in_formation:
+            fresh &= self._in_formation[:n]
+        return int(np.count_nonzero(fresh))
+
+    def paths(
+        self,
+        *,
+        now_s: float,
+        dt_s: float,
+        steps: int,
+        since_s: float,
+        own_cov_radius_m: float,
+        params: FieldParams,
+        extra: Sequence[HorizonPlan] = (),
+        current_position_only: bool = False,
+    ) -> TeammatePaths:
+        """The plans stamped at or after since_s, aligned to our horizon (now_s + n dt_s, n < steps), with
+        their eq. 15 d_max (as fields.teammate_paths), then the extra plans (through teammate_paths)."""
+        n = self._count
+        rows = np.flatnonzero(self._stamps[:n] >= since_s)
+        out = np.empty((rows.shape[0], steps, 3))
+        align_rows(
+            self._positions,
+            self._lengths,
+            self._stamps,
+            self._dts,
+            rows,
+            now_s,
+            dt_s,
+            current_position_only,
+            out,
+        )
+        cap = params.covariance_radius_cap_m
+        age = np.maximum(now_s - self._stamps[rows] - params.teammate_age_grace_s, 0.0)
+        radii = np.minimum(self._radii[rows], cap)
+        d_max = (
+            params.teammate_d_max_base_m
+            + min(own_cov_radius_m, cap)
+            + radii
+            + params.teammate_speed_mps * age
+        )
+        mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max)
+        if not extra:
+            return mates
+        more = teammate_paths(
+            extra,
+            now_s=now_s,
+            dt_s=dt_s,
+            steps=steps,
+            own_cov_radius_m=own_cov_radius_m,
+            params=params,
+            current_position_only=current_position_only,
+        )
+        return TeammatePaths(
+            np.concatenate([out, more.positions_m]),
+            np.concatenate([mates.vehicle_ids, more.vehicle_ids]),
+            np.concatenate([mates.in_formation, more.in_formation]),
+            np.concatenate([d_max, more.d_max_m]),
+            more.rejected,
+        )

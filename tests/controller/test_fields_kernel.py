@@ -1,0 +1,85 @@
+"""The compiled external inputs (controller/fields_kernel.py) against the numpy reference (fields.py) on
+instances recorded from simulated flights: clustered starts that spread out among the paper's trees, the dqmpc
+baseline, virtual obstacles, and 16 MAVs over a lossy link (phantom teammates)."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import controller.formation as formation
+from controller.fields import external_inputs
+from controller.fields_kernel import TERMS, external_inputs_compiled
+from controller.params import Method
+from server.lab.simulation import SimConfig, run_simulation
+
+pytestmark = pytest.mark.slow  # four simulated flights record the instances: about 20 s of CPU
+
+FLIGHTS = (
+    SimConfig(vehicles=8, duration_s=16.0, warmup_s=15.0, rate_hz=10.0, start="cluster", seed=3),
+    SimConfig(
+        vehicles=5,
+        duration_s=14.0,
+        warmup_s=13.0,
+        rate_hz=10.0,
+        method=Method.DQMPC,
+        start="cluster",
+        trees="none",
+    ),
+    SimConfig(
+        vehicles=5, duration_s=14.0, warmup_s=13.0, rate_hz=10.0, virtual_obstacles="paper", trees="none"
+    ),
+    SimConfig(vehicles=16, duration_s=11.0, warmup_s=10.0, rate_hz=10.0, seed=4, comm_loss=0.5),
+)
+
+
+@pytest.fixture(scope="module")
+def recorded() -> list[dict]:
+    """Every external-input call of the flights above, flown with the numpy reference."""
+    calls: list[dict] = []
+
+    def reference(**kwargs):
+        calls.append(copy.deepcopy(kwargs))
+        return external_inputs(**kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(formation, "external_inputs_compiled", reference)
+        for flight in FLIGHTS:
+            run_simulation(flight)
+    return calls
+
+
+def test_at_least_a_thousand_instances_were_recorded(recorded):
+    assert len(recorded) >= 1000
+
+
+def test_recorded_instances_exercise_every_term(recorded):
+    """Each term is non-zero in at least 2 % of the instances, so every branch of the kernel is compared."""
+    counts = {name: 0 for name in TERMS}
+    for kwargs in recorded[::5]:
+        ref = external_inputs(**kwargs)
+        for name in TERMS:
+            counts[name] += bool(np.any(getattr(ref, name)))
+    assert min(counts.values()) >= 0.02 * len(recorded[::5]), counts
+
+
+def test_compiled_inputs_equal_the_reference_on_every_recorded_instance(recorded):
+    worst = dict.fromkeys(TERMS, 0.0)
+    for kwargs in recorded:
+        ref, fast = external_inputs(**kwargs), external_inputs_compiled(**kwargs)
+        assert fast.fault == ref.fault
+        for name in TERMS:
+            worst[name] = max(worst[name], float(np.max(np.abs(getattr(fast, name) - getattr(ref, name)))))
+    assert max(worst.values()) < 1e-9, worst
+
+
+def test_non_finite_total_is_a_fault_with_zero_inputs(recorded):
+    kwargs = dict(recorded[0])
+    own = np.array(kwargs["own_positions_m"], dtype=float)
+    own[3, 0] = np.nan
+    kwargs["own_positions_m"] = own
+    ref, fast = external_inputs(**kwargs), external_inputs_compiled(**kwargs)
+    assert ref.fault and fast.fault
+    np.testing.assert_array_equal(fast.total, 0.0)

@@ -1,0 +1,108 @@
+"""Specification of the teammates' plan table (controller/teammates.py): the same TeammatePaths as
+fields.teammate_paths builds from the plans, with each plan checked once when it arrives."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controller.fields import FieldParams, teammate_paths
+from controller.messages import HorizonPlan
+from controller.teammates import TeammateTable
+
+PARAMS = FieldParams()
+STEPS = 16
+
+
+def plan(rng: np.random.Generator, vid: int, stamp: float, *, length: int = 17) -> HorizonPlan:
+    a = rng.normal(size=(3, 3))
+    return HorizonPlan(
+        vehicle_id=vid,
+        stamp_s=stamp,
+        dt_s=rng.choice([0.1, 0.05]),
+        positions_m=rng.uniform(-15.0, 15.0, (length, 3)),
+        velocities_mps=rng.normal(size=(length, 3)),
+        in_formation=bool(rng.integers(2)),
+        position_cov_m2=a @ a.T * 0.1,
+    )
+
+
+@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize("price", [False, True])
+def test_paths_equal_teammate_paths_of_the_fresh_plans(seed, price):
+    rng = np.random.default_rng(seed)
+    table = TeammateTable(own_id=0, plan_length=17, capacity=2)  # grows as teammates appear
+    latest: dict[int, HorizonPlan] = {}
+    for _ in range(40):  # plans arrive in random order of vehicles and ages, some out of date
+        p = plan(
+            rng, int(rng.integers(1, 9)), float(rng.uniform(0.0, 10.0)), length=int(rng.choice([17, 12]))
+        )
+        table.update(p)
+        if p.vehicle_id not in latest or p.stamp_s >= latest[p.vehicle_id].stamp_s:
+            latest[p.vehicle_id] = p
+    now, since = 10.2, float(rng.uniform(0.0, 8.0))
+    fresh = [latest[v] for v in sorted(latest) if latest[v].stamp_s >= since]
+    expected = teammate_paths(
+        fresh,
+        now_s=now,
+        dt_s=0.1,
+        steps=STEPS,
+        own_cov_radius_m=0.4,
+        params=PARAMS,
+        current_position_only=price,
+    )
+    got = table.paths(
+        since_s=since,
+        now_s=now,
+        dt_s=0.1,
+        steps=STEPS,
+        own_cov_radius_m=0.4,
+        params=PARAMS,
+        current_position_only=price,
+    )
+    np.testing.assert_allclose(got.positions_m, expected.positions_m, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got.vehicle_ids, expected.vehicle_ids)
+    np.testing.assert_array_equal(got.in_formation, expected.in_formation)
+    np.testing.assert_allclose(got.d_max_m, expected.d_max_m, rtol=0, atol=1e-12)
+    assert table.plans() == tuple(latest[v] for v in sorted(latest))
+
+
+def test_extra_plans_come_after_the_stored_ones():
+    rng = np.random.default_rng(1)
+    table = TeammateTable(own_id=0, plan_length=17)
+    stored, extra = plan(rng, 5, 1.0), plan(rng, 2, 1.0)
+    table.update(stored)
+    got = table.view(0.0, (extra,)).paths(
+        now_s=1.0, dt_s=0.1, steps=STEPS, own_cov_radius_m=0.0, params=PARAMS
+    )
+    np.testing.assert_array_equal(got.vehicle_ids, [5, 2])
+    assert tuple(table.view(0.0, (extra,))) == (stored, extra)
+
+
+def test_own_absurd_and_older_plans_are_not_stored():
+    rng = np.random.default_rng(2)
+    table = TeammateTable(own_id=3, plan_length=17)
+    assert table.update(plan(rng, 3, 1.0)) == "refused"
+    absurd = plan(rng, 4, 1.0)
+    absurd = HorizonPlan(
+        vehicle_id=4,
+        stamp_s=1.0,
+        dt_s=0.1,
+        positions_m=absurd.positions_m,
+        velocities_mps=absurd.velocities_mps,
+        position_cov_m2=np.full((3, 3), np.nan),
+    )
+    assert table.update(absurd) == "refused"
+    newer, older = plan(rng, 4, 2.0), plan(rng, 4, 1.5)
+    assert table.update(newer) == "stored" and table.update(older) == "older"
+    assert table.plans() == (newer,)
+
+
+def test_fresh_count_and_ids_count_in_formation_plans_only():
+    rng = np.random.default_rng(3)
+    table = TeammateTable(own_id=0, plan_length=17)
+    plans = [plan(rng, v, float(v)) for v in range(1, 7)]
+    for p in plans:
+        table.update(p)
+    expected = {p.vehicle_id for p in plans if p.in_formation and p.stamp_s >= 3.0}
+    assert table.fresh_ids(3.0) == expected and table.fresh_count(3.0) == len(expected)

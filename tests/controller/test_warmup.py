@@ -1,0 +1,18 @@
+"""controller/warmup.py runs every compiled kernel on a tick's path once."""
+
+from __future__ import annotations
+
+from controller import fields_kernel, mpc_kernels, teammates, tracker
+from controller.warmup import warm_up
+
+
+def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
+    warm_up()
+    kernels = (
+        fields_kernel._kernel,
+        mpc_kernels.solve_fast,
+        mpc_kernels.rollout,
+        teammates.align_rows,
+        tracker._predicted,
+    )
+    assert all(kernel.signatures for kernel in kernels)
