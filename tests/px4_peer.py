@@ -13,8 +13,10 @@ What it does, the way PX4 v1.16 does it:
   mode change by the ground station or a pilot ends a failsafe; after every disarm the vehicle returns to the
   last mode asked for that allows arming (Offboard after an offboard flight, never Land or Return);
 - arming checks: arming is denied, with PX4's STATUSTEXT "Arming denied: Resolve system health failures
-  first", when COM_ARMABLE is 0 or the mode asked for is Offboard without a set-point stream (the SYS_STATUS
-  pre-arm bit and the heartbeat say so beforehand);
+  first", when COM_ARMABLE is 0, when the mode asked for is Offboard without a set-point stream, or when
+  NAV_DLL_ACT is set and no ground station was heard for COM_DL_LOSS_T (then after "Preflight Fail: No
+  connection to the ground control station"); the SYS_STATUS pre-arm bit and the heartbeat say so
+  beforehand;
 - LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION at `rate_hz`; EXTENDED_SYS_STATE
   (landed state); SYS_STATUS (sensor health bits, pre-arm check, battery); GPS_RAW_INT (accuracy);
   HOME_POSITION (home resets at every arming; the local NED origin stays where it booted); GPS_GLOBAL_ORIGIN
@@ -40,7 +42,7 @@ mode change is logged with its time (`mode_log()`), and so is every STATUSTEXT s
 What it leaves out: estimator behaviour (position is truth, no drift or noise), wind and real multicopter
 dynamics, terrain (ground is flat at the boot altitude), attitude/rate/acceleration-only offboard set-points,
 SET_POSITION_TARGET_GLOBAL_INT, missions, geofence, battery failsafes (COM_LOW_BAT_ACT is stored, the battery
-never runs low), RC input (a pilot is emulated by `pilot_takeover`), arming checks other than the two above,
+never runs low), RC input (a pilot is emulated by `pilot_takeover`), arming checks other than the three above,
 PX4's events protocol (the detailed reasons behind its STATUSTEXT lines; MAVSDK's events plugin hears nothing
 from the peer), MAVLink signing, FTP and component metadata, most statustext chatter, message-interval
 changes (acknowledged but rates stay fixed), COM_RC_OVERRIDE, and PX4's azimuthal projection (local <->
@@ -99,6 +101,7 @@ PILOT_MODES = (PeerMode.MANUAL, PeerMode.ALTCTL, PeerMode.POSCTL, PeerMode.STABI
 # Modes PX4 does not return to after a disarm (they prevent arming).
 NO_ARMING_MODES = (PeerMode.LAND, PeerMode.RTL)
 ARMING_DENIED = "Arming denied: Resolve system health failures first"
+NO_GCS = "Preflight Fail: No connection to the ground control station"
 
 # name -> (PX4 default, MAVLink type). Floats are REAL32, ints INT32 (sent byte-wise, as PX4 does).
 DEFAULT_PARAMS: dict[str, tuple[float, int]] = {
@@ -523,6 +526,8 @@ class Px4Peer:
                     self._ack(msg, cmd, accepted)
                 elif not self._landed or not self._can_arm(now):
                     self._ack(msg, cmd, denied)
+                    if self._gcs_required_but_lost(now):
+                        self._text(mavlink.MAV_SEVERITY_CRITICAL, NO_GCS)
                     self._text(mavlink.MAV_SEVERITY_CRITICAL, ARMING_DENIED)
                 else:
                     self._armed, self._armed_t, self._flew_since_arming = True, now, False
@@ -572,9 +577,17 @@ class Px4Peer:
     def _offboard_signal_lost(self, now: float) -> bool:
         return now - self._last_sp_t > self._params["COM_OF_LOSS_T"][0]
 
+    def _gcs_lost(self, now: float) -> bool:
+        return now - self._last_gcs_heartbeat_t > self._params["COM_DL_LOSS_T"][0]
+
+    def _gcs_required_but_lost(self, now: float) -> bool:
+        """PX4 makes a ground-station connection an arming check when NAV_DLL_ACT acts on its loss."""
+        return int(self._params["NAV_DLL_ACT"][0]) != 0 and self._gcs_lost(now)
+
     def _can_arm(self, now: float) -> bool:
-        """PX4's arming checks as modelled: COM_ARMABLE, and an offboard signal when Offboard is asked for."""
-        if int(self._params["COM_ARMABLE"][0]) < 1:
+        """PX4's arming checks as modelled: COM_ARMABLE, an offboard signal when Offboard is asked for, and a
+        ground station heard within COM_DL_LOSS_T when NAV_DLL_ACT is set."""
+        if int(self._params["COM_ARMABLE"][0]) < 1 or self._gcs_required_but_lost(now):
             return False
         return not (self._intended is PeerMode.OFFBOARD and self._offboard_signal_lost(now))
 
@@ -728,7 +741,7 @@ class Px4Peer:
         ):
             self._disarm(now, "Disarmed by auto preflight disarming")  # armed but never took off
         fs = self._failsafe
-        gcs_lost = now - self._last_gcs_heartbeat_t > self._params["COM_DL_LOSS_T"][0]
+        gcs_lost = self._gcs_lost(now)
         if fs is not None and fs.cause == "offboard" and not self._offboard_signal_lost(now):
             self._failsafe = None  # a mode fallback: it ends, back to Offboard, once set-points come again
         elif fs is not None and fs.cause == "gcs" and fs.action is PeerMode.HOLD and not gcs_lost:

@@ -93,6 +93,7 @@ class VehicleTruth:
     mode: str = "UNKNOWN"
     armed: bool = False
     failsafe: bool = False
+    system_status: str = "UNKNOWN"  # PX4's heartbeat: STANDBY (can arm), UNINIT (cannot), ACTIVE, CRITICAL
     texts: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -177,17 +178,26 @@ _LINE_BUFFERED = ["stdbuf", "-oL", "-eL"] if shutil.which("stdbuf") else []
 
 
 def _instance_free(instance: int) -> bool:
-    """No PX4 holds instance's lock file (/tmp/px4_lock-N, locked by a running PX4 server)."""
-    path = Path(f"/tmp/px4_lock-{instance}")
-    if not path.exists():
-        return not Path(f"/tmp/px4-sock-{instance}").exists()
-    try:
-        with open(path, "a") as f:
-            fcntl.lockf(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            fcntl.lockf(f, fcntl.LOCK_UN)
+    """No PX4 runs as `instance`: none holds its lock file (/tmp/px4_lock-N, locked while a PX4 server runs,
+    removed when it exits) and nothing answers on its shell socket (/tmp/px4-sock-N; PX4 leaves it behind
+    when killed, and a new server replaces it)."""
+    lock = Path(f"/tmp/px4_lock-{instance}")
+    if lock.exists():
+        try:
+            with open(lock, "a") as f:
+                fcntl.lockf(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.lockf(f, fcntl.LOCK_UN)
+        except OSError:
+            return False
+    sock = Path(f"/tmp/px4-sock-{instance}")
+    if not sock.exists():
         return True
-    except OSError:
-        return False
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        try:
+            s.connect(str(sock))
+        except OSError:
+            return True  # a stale socket: nobody listens
+    return False
 
 
 class _GcsListener:
@@ -246,6 +256,9 @@ class _GcsListener:
                 t.mode = _PX4_MODES.get((main, sub if main == 4 else 0), f"{main}/{sub}")
                 t.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 t.failsafe = t.armed and msg.system_status == mavlink.MAV_STATE_CRITICAL
+                t.system_status = mavlink.enums["MAV_STATE"][msg.system_status].name.removeprefix(
+                    "MAV_STATE_"
+                )
             elif kind == "GLOBAL_POSITION_INT":
                 point = GeodeticPoint(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
                 t.enu_m = geodetic_to_enu(point, reference=REF)
@@ -256,7 +269,12 @@ class _GcsListener:
         with self._lock:
             t = self.truth
             return VehicleTruth(
-                enu_m=t.enu_m.copy(), mode=t.mode, armed=t.armed, failsafe=t.failsafe, texts=list(t.texts)
+                enu_m=t.enu_m.copy(),
+                mode=t.mode,
+                armed=t.armed,
+                failsafe=t.failsafe,
+                system_status=t.system_status,
+                texts=list(t.texts),
             )
 
     def close(self) -> None:
@@ -291,6 +309,10 @@ class SitlTeam(Team):
         self.logs: list[Path] = []
         try:
             instances = [i for i in range(20, 200) if _instance_free(i)][: len(homes)]
+            if len(instances) < len(homes):
+                raise RuntimeError(
+                    f"only {len(instances)} free PX4 instance numbers in 20..199 for {len(homes)}"
+                )
             for n, (instance, home) in enumerate(zip(instances, homes, strict=False)):
                 self._start(n, instance, home, etc, {**(params or {}), **(per_vehicle or {}).get(n + 1, {})})
             self._wait_ready(ready_timeout_s)
@@ -516,12 +538,44 @@ class Sampler:
         self._thread.join(timeout=2.0)
 
 
-def wait_for(condition: Callable[[], bool], *, timeout_s: float, what: str, every_s: float = 0.2) -> float:
-    """Poll until condition() holds; seconds it took, or AssertionError naming what did not happen."""
+def wait_for(
+    condition: Callable[[], bool],
+    *,
+    timeout_s: float,
+    what: str,
+    every_s: float = 0.2,
+    detail: Callable[[], str] | None = None,
+) -> float:
+    """Poll until condition() holds; seconds it took, or AssertionError naming what did not happen (and
+    detail(), e.g. what the station and PX4 showed then)."""
     t0 = time.monotonic()
     while True:
         if condition():
             return time.monotonic() - t0
         if time.monotonic() - t0 > timeout_s:
-            raise AssertionError(f"{what} did not happen within {timeout_s:.0f} s")
+            shown = f"\n{detail()}" if detail is not None else ""
+            raise AssertionError(f"{what} did not happen within {timeout_s:.0f} s{shown}")
         time.sleep(every_s)
+
+
+def describe(team: Team, station: Station | None = None) -> str:
+    """What PX4 and (if given) the station show for each vehicle: for a failing scenario's message."""
+    lines = []
+    truth = team.truth()
+    vehicles = []
+    if station is not None and station.proc.poll() is None:
+        with contextlib.suppress(httpx.HTTPError):
+            vehicles = station.state()["vehicles"]
+    for i, t in enumerate(truth):
+        line = (
+            f"MAV {i + 1}: PX4 {t.mode} armed={t.armed} status={t.system_status} "
+            f"height={t.enu_m[2]:.1f} m; last said: {[text for _, text in t.texts[-3:]]}"
+        )
+        if i < len(vehicles):
+            v = vehicles[i]
+            line += (
+                f"; view: phase={v['phase']} mode={v['autopilot_mode']} can_arm={v['can_arm']} "
+                f"in_formation={v['in_formation']} failsafe={v['failsafe']} refusal={v['arming_refusal']!r}"
+            )
+        lines.append(line)
+    return "\n".join(lines)

@@ -108,7 +108,10 @@ class Px4Config:
     until skyring switches its mode, and must still be adopted); supervise_period_s: supervisor tick;
     max_setpoint_rate_hz: set-points forwarded to MAVSDK at most this often (it re-sends the latest at 20 Hz);
     max_setpoint_range_m: set-points farther than this from the team origin are rejected and counted;
-    min_takeoff_altitude_m: the lowest takeoff altitude above home skyring asks for.
+    min_takeoff_altitude_m: the lowest takeoff altitude above home skyring asks for; armable_wait_s: after
+    asking for Hold, how long a take-off waits for PX4 to report it can arm before arming (PX4 re-runs its
+    arming checks at 10 Hz, after a mode change and after a ground station comes back; an arming request
+    before that is refused), then it arms all the same and PX4's refusal, if any, tells why.
     """
 
     connect_timeout_s: float = 30.0
@@ -124,6 +127,7 @@ class Px4Config:
     max_setpoint_range_m: float = 2000.0
     min_takeoff_altitude_m: float = 1.0
     command_timeout_s: float = 10.0
+    armable_wait_s: float = 3.0
     supervisor: SupervisorParams = field(default_factory=SupervisorParams)
 
     def __post_init__(self) -> None:
@@ -161,6 +165,11 @@ class Px4Config:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {value}")
+        if not (math.isfinite(self.armable_wait_s) and 0.0 <= self.armable_wait_s < self.command_timeout_s):
+            raise ValueError(
+                f"armable_wait_s must be >= 0 and below command_timeout_s ({self.command_timeout_s} s), "
+                f"got {self.armable_wait_s}"
+            )
 
     def failsafe_params(self) -> dict[str, float | int]:
         """The PX4 parameters skyring sets on every vehicle it connects to (floats stay floats)."""
@@ -961,6 +970,7 @@ class Px4Autopilot:
         log.info("vehicle %d: %s (%s)", self.vehicle_id, command.value, self._supervisor.engagement.value)
         try:
             await asyncio.wait_for(self._command(command), timeout=self.config.command_timeout_s)
+            self._supervisor.command_done(self._clock())
         except (TimeoutError, ActionError, OffboardError) as exc:
             self._failed_commands += 1
             self._fault = f"{command.value} failed: {exc or 'timed out'}"
@@ -986,6 +996,7 @@ class Px4Autopilot:
             # for Takeoff right after setting it has been seen to climb to the old 2.5 m.
             await action.set_takeoff_altitude(self._takeoff_altitude_m())
             await action.hold()
+            await self._until_armable(self.config.armable_wait_s)
             await action.arm()
             await action.takeoff()
         elif command is Command.START_OFFBOARD:
@@ -999,6 +1010,20 @@ class Px4Autopilot:
                 await action.hold()
         elif command is Command.LAND:
             await action.land()
+
+    async def _until_armable(self, timeout_s: float) -> bool:
+        """Wait up to timeout_s for PX4 to report that its arming checks pass (SYS_STATUS's pre-arm bit,
+        through MAVSDK's health); whether they do. Seen on PX4 v1.16: a second ground station's first arming
+        request, sent as PX4 noticed that station's heartbeat, was refused for "No connection to the ground
+        control station" (NAV_DLL_ACT makes that a check)."""
+        deadline = self._clock() + timeout_s
+        while True:
+            with self._cache.lock:
+                if self._can_arm_locked():
+                    return True
+            if self._clock() >= deadline:
+                return False
+            await asyncio.sleep(0.1)
 
     def _takeoff_altitude_m(self) -> float:
         """MIS_TAKEOFF_ALT (above home) that brings the vehicle to the requested team-frame height. Home

@@ -169,6 +169,12 @@ class OffboardSupervisor:
             self._takeoff_failed_s = now_s
             self.takeoff_failures += 1
 
+    def command_done(self, now_s: float) -> None:
+        """The back-end got the last command through at now_s: the grace for its mode to show in telemetry
+        starts again from here (a take-off asks for Hold, waits for PX4's arming checks, arms and takes off:
+        seconds on a busy machine, during which telemetry may still show the Hold it asked for first)."""
+        self._last_command_s = max(self._last_command_s, now_s)
+
     @property
     def takeoff_failed(self) -> bool:
         """The last take-off failed and waits to be tried again."""

@@ -150,6 +150,24 @@ async def test_setpoints_fly_the_vehicle_to_the_enu_target_in_offboard():
         assert seen[-1].yaw_rad == pytest.approx(0.0, abs=1e-3)
 
 
+async def test_a_takeoff_waits_in_hold_for_px4s_arming_checks_instead_of_being_refused():
+    # PX4 cannot arm for a moment (here COM_ARMABLE 0 for 0.5 s; on PX4 v1.16: until its arming checks have
+    # seen a ground station that just came back): skyring asks for Hold and arms once PX4 says it can.
+    config = Px4Config(
+        connect_timeout_s=10.0, health_timeout_s=10.0, armable_wait_s=6.0, supervisor=CONFIG.supervisor
+    )
+    async with px4_fleet([home_at(0, 0)], config=config) as (fleet, (peer,)):
+        a = fleet.autopilots[0]
+        peer.set_param("COM_ARMABLE", 0)
+        await wait_until(lambda: state_of(a).can_arm is False, timeout_s=5.0, what="PX4 saying it cannot arm")
+        a.takeoff(4.0)
+        await asyncio.sleep(0.5)
+        peer.set_param("COM_ARMABLE", 1)
+        await wait_until(lambda: state_of(a).in_air, timeout_s=15.0, what="the take-off")
+        assert not [text for _, _, text in peer.texts() if "Arming denied" in text]
+        assert a.status().takeoff_failures == 0 and state_of(a).arming_refusal is None
+
+
 async def test_frozen_agent_puts_the_vehicle_in_hold_within_a_second_then_lands():
     async with px4_fleet([home_at(0, 0)]) as (fleet, (peer,)):
         a = fleet.autopilots[0]

@@ -140,6 +140,21 @@ def test_mode_lagging_behind_a_command_is_not_read_as_a_takeover():
     assert sup.engagement is Engagement.ENGAGING
 
 
+def test_a_slow_takeoff_command_gets_its_grace_from_when_it_went_through():
+    # The take-off (Hold, PX4's arming checks, arm, take off) took 2.5 s, past mode_grace_s; telemetry still
+    # shows the Hold it asked for first while the vehicle climbs in Takeoff: not the end of the take-off.
+    sup = OffboardSupervisor(P)
+    sup.request_takeoff(5.0)
+    assert sup.step(obs(0.0, FlightMode.OFFBOARD, armed=False, in_air=False)) is Command.TAKEOFF
+    sup.command_done(2.5)
+    run(sup, 2.5, 3.45, FlightMode.HOLD, setpoints=False)  # stale Hold for < mode_grace_s after 2.5 s
+    assert sup.engagement is Engagement.TAKING_OFF
+    run(sup, 3.45, 6.0, FlightMode.TAKEOFF, setpoints=False)
+    assert sup.engagement is Engagement.TAKING_OFF and not sup.released
+    run(sup, 6.0, 6.5, FlightMode.HOLD, setpoints=False)  # PX4 holds at height: now engage
+    assert sup.engagement is Engagement.ENGAGING
+
+
 def test_released_vehicle_reengages_on_takeoff_request_in_the_air():
     sup, t = following()
     run(sup, t, t + 2.0, FlightMode.MANUAL)
