@@ -4,7 +4,9 @@ viser serves its own page and WebSocket on its own port from a daemon thread; `p
 any thread (the ground station calls it from its asyncio loop at about 10 Hz) and applies a whole frame
 atomically. Layout: the control panel docked on the right (its tabs scroll on their own), the Mission window
 with LAND ALL floating at the bottom left of the 3-D view (`webui.panels`). A new page opens with its camera
-framing the formation (`webui.camera`).
+framing the formation (`webui.camera`). With a `ClientAccess`, each viser client's connection is matched to
+the operator it was forwarded for (the ticket header the ground station's front puts on it), and every
+control acts on that operator's behalf.
 """
 
 from __future__ import annotations
@@ -14,11 +16,16 @@ import io
 import threading
 
 import viser
+import viser.infra
 
+from webui.access import ClientAccess, OpenAccess
 from webui.camera import FOV_RAD, CameraDirector, formation_frame, orbit_pose
 from webui.panels import CONTROL_PANEL_WIDTH_PX, OperatorPanel
 from webui.scene import SceneRenderer
 from webui.view import OperatorActions, SceneView
+
+TICKET_HEADER = "X-Skyring-Ticket"
+"""The header on a forwarded viser connection that names the signed-in browser behind it."""
 
 
 class OperatorUi:
@@ -26,7 +33,8 @@ class OperatorUi:
 
     host/port: where viser listens (port 0 picks a free port; a busy port makes viser take the next free
     one: read `port` for the real one). sigma: size of the covariance ellipsoid in standard deviations.
-    shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate).
+    shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate). access:
+    who each client is (default: every client is an operator, for a station on loopback without sign-in).
     """
 
     def __init__(
@@ -38,6 +46,7 @@ class OperatorUi:
         port: int = 8080,
         sigma: float = 2.0,
         shadows: bool = False,
+        access: ClientAccess | None = None,
     ) -> None:
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own URL box; callers print ours
             self.server = viser.ViserServer(
@@ -56,13 +65,30 @@ class OperatorUi:
         self.server.initial_camera.look_at = tuple(pose.look_at_m)
         self.server.scene.configure_default_lights(cast_shadow=shadows)
         self._lock = threading.Lock()
+        self.access = access or OpenAccess()
+        # viser's own connect hook runs in its event loop before it sends a new client anything (the
+        # public on_client_connect runs only after the client has received the whole scene)
+        self._websock = self.server._websock_server  # noqa: SLF001
+        self._websock.on_client_connect(self._admit)
+        self._websock.on_client_disconnect(lambda conn: self.access.client_disconnected(conn.client_id))
         self._latest = initial
         self.camera = CameraDirector()
         self.scene = SceneRenderer(self.server.scene, sigma=sigma, on_vehicle_click=self._on_vehicle_click)
-        self.panel = OperatorPanel(self.server, actions, initial, camera=self.camera, sigma=sigma)
+        self.panel = OperatorPanel(
+            self.server, actions, initial, camera=self.camera, sigma=sigma, access=self.access
+        )
         self.server.on_client_connect(self._on_connect)
         self.server.on_client_disconnect(lambda client: self.camera.forget(client.client_id))
         self.publish(initial)
+
+    async def _admit(self, connection: viser.infra.WebsockClientConnection) -> None:
+        """Match a new connection to its operator by its ticket header; close it at once, before viser
+        sends it the scene, when `access` does not admit it."""
+        socket = self._websock._live_connections.get(connection.client_id)  # noqa: SLF001
+        request = getattr(socket, "request", None)
+        ticket = request.headers.get(TICKET_HEADER) if request is not None else None
+        if not self.access.client_connected(connection.client_id, ticket) and socket is not None:
+            await socket.close(1008, "connect through the ground station's own page (sign-in)")
 
     @property
     def port(self) -> int:

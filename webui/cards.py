@@ -178,8 +178,11 @@ def agent_line(vehicle: VehicleView) -> str:
         skew = f" **{SKEW_FLAG}**" if a.clock_skew else ""
         parts.append(f"clock {a.clock_offset_s * 1e3:+.0f} ms{skew}")
     if a.commands:
-        command_id, action, outcome, message = a.commands[-1]
-        parts.append(f"cmd {command_id} {action}: {outcome}" + (f" ({message})" if message else ""))
+        last = a.commands[-1]
+        parts.append(
+            f"cmd {last.command_id} {last.action}: {last.outcome}"
+            + (f" ({last.message})" if last.message else "")
+        )
     return " · ".join(parts)
 
 

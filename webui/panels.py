@@ -12,9 +12,11 @@ Two windows:
   ellipsoid's size; the team origin) and Plots (`plots`).
 
 Every control calls the same `OperatorActions` the REST API calls; a refusal (ValueError) becomes a
-notification to the client that asked, and the control snaps back to the ground station's value. Whatever
-takes a MAV off the ground (Start formation, Release of a landed MAV) or lands it (Land, LAND ALL) sits behind
-a per-client confirmation modal; when the pre-take-off checks (person keep-out, d_min) refuse a start or a
+notification to the client that asked, and the control snaps back to the ground station's value. Every
+control acts on behalf of the client's signed-in operator (`webui.access`): the ground station refuses (and
+audits) a command from a client that is not signed in as an operator. Whatever takes a MAV off the ground
+(Start formation, Release of a landed MAV) or lands it (Land, LAND ALL) sits behind a per-client confirmation
+modal, shown only to operators; when the pre-take-off checks (person keep-out, d_min) refuse a start or a
 release, a second modal offers the logged override. viser runs these callbacks on its own threads, so the
 actions object must be thread-safe (the ground station's is).
 """
@@ -29,6 +31,7 @@ from typing import Any, Literal
 import numpy as np
 import viser
 
+from webui.access import ClientAccess, OpenAccess, acting_as
 from webui.alerts_panel import AlertsPanel
 from webui.camera import CameraDirector
 from webui.cards import alert_summary_html, header_html, legend_html
@@ -93,11 +96,13 @@ class OperatorPanel:
         plot_every: int = 5,
         camera: CameraDirector | None = None,
         sigma: float = 2.0,
+        access: ClientAccess | None = None,
     ) -> None:
         self._server = server
         self._actions = actions
         self._camera = camera or CameraDirector()
         self._sigma = sigma
+        self._access = access or OpenAccess()
         self._lock = threading.Lock()
         self._pending_clicks: dict[int, float] = {}  # client id -> radius of the obstacle to place
         self._click_registered = False
@@ -294,9 +299,13 @@ class OperatorPanel:
         return on_click
 
     def _run(self, client: viser.ClientHandle | None, action: Callable[[], object], done: str | None) -> bool:
-        """Run one operator action; tell the client the outcome. Never raises: a GUI callback must not die."""
+        """Run one operator action on behalf of the client's operator; tell the client the outcome. Never
+        raises: a GUI callback must not die."""
+        if client is None:  # not an operator's click (a programmatic update)
+            return False
         try:
-            action()
+            with acting_as(self._access.principal_of(client.client_id).for_command()):
+                action()
         except (ValueError, KeyError) as exc:
             _notify(client, "Refused", str(exc), color="red")
             return False
@@ -427,8 +436,12 @@ class OperatorPanel:
     ) -> None:
         """Ask the client that clicked to confirm in a modal; run `action` only on its confirm button (then
         notify `done`, unless None: the action tells the outcome itself). One modal per client and question:
-        asking again while it is open does not stack another."""
+        asking again while it is open does not stack another. A client that may not command gets no modal:
+        the command goes straight to the ground station, which refuses and audits it."""
         if client is None:
+            return
+        if not self._access.principal_of(client.client_id).may_command:
+            self._run(client, action, done)  # no modal: the ground station refuses and audits it
             return
         key = (client.client_id, title)
         with self._lock:

@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 import viser
 
-from controller.messages import Obstacle
 from webui.geometry import (
     box_segments,
     camera_wxyz,
@@ -36,7 +35,7 @@ from webui.geometry import (
     vehicle_color,
     yaw_wxyz,
 )
-from webui.view import SceneView, VehicleView
+from webui.view import ObstacleView, SceneView, VehicleView
 
 PERSON_TRUTH_COLOR = (170, 170, 170)
 PERSON_ESTIMATE_COLOR = (20, 20, 20)
@@ -84,7 +83,7 @@ class SceneRenderer:
         self.ellipsoid_axes_m: np.ndarray | None = None  # full lengths (3,) of the drawn ellipsoid's axes
         self._vehicles: dict[int, dict[str, Any]] = {}
         self._plans: dict[int, tuple[Any, Any]] = {}
-        self._obstacles: dict[str, tuple[Obstacle, Any]] = {}
+        self._obstacles: dict[str, tuple[ObstacleView, Any]] = {}
         self._arena_key: tuple[float, ...] | None = None
         self._origin_text: str | None = None
         self._person_truth = scene.add_cylinder(
@@ -294,7 +293,7 @@ class SceneRenderer:
         self._covariance_outline.visible = False
         self._covariance_label.visible = False
 
-    def _draw_obstacles(self, obstacles: tuple[Obstacle, ...]) -> None:
+    def _draw_obstacles(self, obstacles: tuple[ObstacleView, ...]) -> None:
         wanted = {o.obstacle_id: o for o in obstacles}
         for obstacle_id in list(self._obstacles):
             old, handle = self._obstacles[obstacle_id]
@@ -335,7 +334,7 @@ def ellipsoid_label(axes_m: np.ndarray, sigma: float) -> str:
     return f"{sigma:g}\u03c3: {a[0]:.2f} x {a[1]:.2f} x {a[2]:.2f} m"
 
 
-def _same_obstacle(a: Obstacle, b: Obstacle) -> bool:
+def _same_obstacle(a: ObstacleView, b: ObstacleView) -> bool:
     return (
         a.kind == b.kind
         and a.radius_m == b.radius_m

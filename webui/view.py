@@ -3,6 +3,11 @@
 webui never imports server/: the ground station adapts its mission snapshot to these frozen view types and
 hands the UI an object satisfying `OperatorActions`. Units are SI, the frame is the team's local ENU world
 frame (x east, y north, z up, metres).
+
+These frozen dataclasses are the one definition of what the operator sees: the 3-D page draws them, and
+`webui.schema` turns them into the JSON of the REST API (and its OpenAPI document), of the WebSocket stream
+and of the flight log's state channel. A field added here appears on all of them; give it a default so older
+flight logs stay readable. numpy fields carry their shape in their type (`webui.arrays`).
 """
 
 from __future__ import annotations
@@ -15,6 +20,18 @@ import numpy as np
 
 from controller.messages import Obstacle, PersonEstimate, frozen_array
 from controller.params import FormationParams
+from webui.arrays import Age, Cov6, Points3, Real, Vec2, Vec3
+
+
+@dataclass(frozen=True)
+class CommandOutcome:
+    """One operator command as one vehicle's agent answered it: action "configure", "land" or "release";
+    outcome "pending", "acked", "refused" (message says why) or "failed" (timed out)."""
+
+    command_id: int
+    action: str
+    outcome: str
+    message: str = ""
 
 
 @dataclass(frozen=True)
@@ -24,8 +41,8 @@ class AgentView:
     lost: nothing heard for longer than the station's limit; age_s: since its last state; clock_offset_s:
     agent clock minus station clock (None before a measurement); clock_skew: beyond the station's limit
     (50 ms); tick_period_p99_error_s: the agent's control-tick jitter; station_lost: the agent no longer hears
-    the station; rejected_messages: network messages it refused; commands: recent operator commands as
-    (command id, action, outcome "pending"/"acked"/"refused"/"failed", message), newest last.
+    the station; rejected_messages: network messages it refused; commands: recent operator commands and
+    how the agent answered them, newest last.
     """
 
     lost: bool
@@ -35,7 +52,7 @@ class AgentView:
     tick_period_p99_error_s: float | None = None
     station_lost: bool = False
     rejected_messages: int = 0
-    commands: tuple[tuple[int, str, str, str], ...] = ()
+    commands: tuple[CommandOutcome, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,14 +84,15 @@ class VehicleView:
     armed: bool
     in_air: bool
     in_formation: bool
-    position_m: np.ndarray
-    yaw_rad: float
-    link_age_s: float
+    position_m: Vec3
+    yaw_rad: Real
+    link_age_s: Age
     link_stale: bool
+    velocity_mps: Vec3 = field(default_factory=lambda: np.zeros(3))
     solve_status: str = ""
     solver_time_s: float | None = None
     battery_fraction: float | None = None
-    plan_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    plan_positions_m: Points3 = field(default_factory=lambda: np.zeros((0, 3)))
     autopilot_mode: str = ""
     failsafe: bool = False
     failsafe_reason: str | None = None
@@ -82,7 +100,6 @@ class VehicleView:
     arming_refusal: str | None = None
     takeoff_check: str | None = None
     agent: AgentView | None = None
-    velocity_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
     plan_age_s: float | None = None
     distance_to_person_m: float | None = None
     released: bool = False
@@ -189,6 +206,82 @@ class GeodeticOrigin:
 
 
 @dataclass(frozen=True, eq=False)
+class ObstacleView:
+    """A vertical cylinder standing on the ground: axis at ENU center_m (2,), radius_m, height_m; kind "tree"
+    (part of the map) or "virtual" (placed by the operator)."""
+
+    obstacle_id: str
+    center_m: Vec2
+    radius_m: float
+    height_m: float
+    kind: str
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center_m", frozen_array(self.center_m, (2,), "center_m"))
+
+    @classmethod
+    def of(cls, obstacle: Obstacle | ObstacleView) -> ObstacleView:
+        if isinstance(obstacle, ObstacleView):
+            return obstacle
+        return cls(
+            obstacle_id=obstacle.obstacle_id,
+            center_m=obstacle.center_m,
+            radius_m=float(obstacle.radius_m),
+            height_m=float(obstacle.height_m),
+            kind=obstacle.kind,
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class PersonEstimateView:
+    """The fused person estimate drawn: valid at stamp_s, position_m (3,), velocity_mps (3,), cov (6, 6) the
+    covariance of [position, velocity] (m^2, m^2/s^2)."""
+
+    stamp_s: float
+    position_m: Vec3
+    velocity_mps: Vec3
+    cov: Cov6
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_m", frozen_array(self.position_m, (3,), "position_m"))
+        object.__setattr__(self, "velocity_mps", frozen_array(self.velocity_mps, (3,), "velocity_mps"))
+        object.__setattr__(self, "cov", frozen_array(self.cov, (6, 6), "cov"))
+
+    @property
+    def position_cov_m2(self) -> np.ndarray:
+        """(3, 3) covariance of the position: drawn as the ellipsoid."""
+        return self.cov[:3, :3]
+
+    @property
+    def position_cov_trace_m2(self) -> float:
+        return float(np.trace(self.cov[:3, :3]))
+
+    @classmethod
+    def of(cls, estimate: PersonEstimate | PersonEstimateView) -> PersonEstimateView:
+        if isinstance(estimate, PersonEstimateView):
+            return estimate
+        return cls(
+            stamp_s=float(estimate.stamp_s),
+            position_m=estimate.position_m,
+            velocity_mps=estimate.velocity_mps,
+            cov=estimate.cov,
+        )
+
+
+@dataclass(frozen=True)
+class Counters:
+    """Bad inputs refused and counted since the start: operator commands refused, detections the trackers
+    gated out (stale or invalid), malformed or misaddressed messages between MAVs, controller exceptions
+    caught (the MAV braked), ticks a MAV braked instead of applying an unsolved plan."""
+
+    refused_commands: int = 0
+    rejected_detections: int = 0
+    rejected_messages: int = 0
+    controller_errors: int = 0
+    braking_ticks: int = 0
+
+
+@dataclass(frozen=True, eq=False)
 class SceneView:
     """Everything drawn at one instant.
 
@@ -197,27 +290,30 @@ class SceneView:
     estimate_source_id: the MAV whose tracker replica it comes from; tracking_error_m: mean over MAVs of
     |estimate - truth| (simulation only, else None); arena_min_m / arena_max_m (3,): the box the MAVs fly
     in; d_des_range_m / h_des_range_m / obstacle_radius_range_m: what the operator may set (the same limits
-    the ground station enforces); alerts: every alert raised so far (`Alert`), most urgent first; pace: how
-    the control loop keeps up (None when not measured); utc_s: wall time of this view (UTC seconds since the
-    epoch; None in a replay without one); recording_path: the flight log being written (None: not
-    recording); origin: the team frame's geodetic origin (None when unknown, as in simulation).
+    the ground station enforces); counters: bad inputs refused so far; alerts: every alert raised so far
+    (`Alert`), most urgent first; pace: how the control loop keeps up (None when not measured); utc_s: wall
+    time of this view (UTC seconds since the epoch; None in a replay without one); recording_path: the flight
+    log being written (None: not recording); origin: the team frame's geodetic origin (None when unknown, as
+    in simulation). Obstacles and the estimate may be given as the controller's `Obstacle` /
+    `PersonEstimate`: they are kept as their view types.
     """
 
     time_s: float
     vehicles: tuple[VehicleView, ...]
-    obstacles: tuple[Obstacle, ...]
+    obstacles: tuple[ObstacleView, ...]
     formation: FormationParams
     formation_enabled: bool
-    arena_min_m: np.ndarray
-    arena_max_m: np.ndarray
+    arena_min_m: Vec3
+    arena_max_m: Vec3
     d_des_range_m: Range
     h_des_range_m: Range
     obstacle_radius_range_m: Range = Range(0.1, 5.0)
-    person_truth_m: np.ndarray | None = None
-    person_estimate: PersonEstimate | None = None
+    person_truth_m: Vec3 | None = None
+    person_estimate: PersonEstimateView | None = None
     estimate_source_id: int | None = None
     tracking_error_m: float | None = None
     camera: CameraView = field(default_factory=CameraView)
+    counters: Counters = field(default_factory=Counters)
     alerts: tuple[Alert, ...] = ()
     pace: PaceView | None = None
     utc_s: float | None = None
@@ -225,11 +321,39 @@ class SceneView:
     origin: GeodeticOrigin | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "vehicles", tuple(self.vehicles))
+        object.__setattr__(self, "alerts", tuple(self.alerts))
+        object.__setattr__(self, "obstacles", tuple(ObstacleView.of(o) for o in self.obstacles))
+        if self.person_estimate is not None:
+            object.__setattr__(self, "person_estimate", PersonEstimateView.of(self.person_estimate))
         object.__setattr__(self, "arena_min_m", frozen_array(self.arena_min_m, (3,), "arena_min_m"))
         object.__setattr__(self, "arena_max_m", frozen_array(self.arena_max_m, (3,), "arena_max_m"))
         if self.person_truth_m is not None:
             truth = frozen_array(self.person_truth_m, (3,), "person_truth_m")
             object.__setattr__(self, "person_truth_m", truth)
+
+
+@dataclass(frozen=True)
+class FormationState:
+    """The formation as the operator sets it: d_des_m / h_des_m (m), whether formation control runs
+    (False: every MAV holds position), and the ranges d_des_m / h_des_m may be set to now (a projection of
+    `SceneView`)."""
+
+    d_des_m: float
+    h_des_m: float
+    enabled: bool
+    d_des_range_m: Range
+    h_des_range_m: Range
+
+    @classmethod
+    def of(cls, view: SceneView) -> FormationState:
+        return cls(
+            d_des_m=view.formation.d_des_m,
+            h_des_m=view.formation.h_des_m,
+            enabled=view.formation_enabled,
+            d_des_range_m=view.d_des_range_m,
+            h_des_range_m=view.h_des_range_m,
+        )
 
 
 class OperatorActions(Protocol):

@@ -34,6 +34,7 @@ COMMANDS: dict[str, str] = {
     "bench": "server.cli.bench:bench",
     "experiment": "server.cli.experiment:experiment",
     "replay": "server.cli.replay:replay",
+    "users": "server.cli.users:users",
     "agent": "server.cli.agent:agent",
     "detect": "server.cli.detect:detect",
 }

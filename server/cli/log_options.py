@@ -1,6 +1,6 @@
 """The flight log on the command line: where `--log` / `--no-log` put it, opening it up front (a path that
-cannot be written is refused before anything flies), its header, and the line printed when it closes.
-Shared by every `skyring serve` mode.
+cannot be written is refused before anything flies), its header, `--foxglove` (its channels live), and the
+lines printed about it. Shared by every `skyring serve` mode.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 
 
 def log_path_option(*, log_path: Path | None, no_log: bool) -> Path | None:
-    """Where `--log PATH` / `--no-log` put the flight log (None: no log); default runs/flight-<UTC>.jsonl."""
+    """Where `--log PATH` / `--no-log` put the flight log (None: no log); default runs/flight-<UTC>.mcap."""
     from server.flightlog.log import default_log_path
 
     if log_path is not None and no_log:
@@ -41,13 +41,35 @@ def open_log(path: Path, *, header: LogHeader) -> FlightLog:
         ) from None
 
 
+def log_line(flight_log: FlightLog | None) -> str:
+    """The printed line saying where the run is recorded."""
+    if flight_log is None or not flight_log.recording:
+        return "flight log:     off"
+    return f"flight log:     {flight_log.name}"
+
+
 def describe_log(flight_log: FlightLog) -> str:
     """One line about a closed flight log: where, what it holds, and any records lost."""
     lost = f"; {flight_log.write_errors} records could not be written" if flight_log.write_errors else ""
     return (
-        f"flight log:     {flight_log.name} ({flight_log.samples} samples, {flight_log.commands} "
-        f"commands{lost}); replay with: skyring replay {flight_log.name}"
+        f"flight log:     {flight_log.name} ({flight_log.samples} samples, {flight_log.audit_records} "
+        f"audit records{lost}); replay with: skyring replay {flight_log.name}"
     )
+
+
+def start_foxglove(port: int | None, *, flight_log: FlightLog | None, header: LogHeader):
+    """`--foxglove PORT`: the flight log's channels live over Foxglove's WebSocket protocol on 127.0.0.1
+    (its server has no sign-in, so it never listens beyond loopback). Returns (server, log to publish to)."""
+    if port is None:
+        return None, flight_log
+    import foxglove
+
+    from server.flightlog.log import FlightLog
+
+    published = flight_log if flight_log is not None else FlightLog(header=header, name="foxglove")
+    server = foxglove.start_server(name="skyring", host="127.0.0.1", port=port, context=published.context)
+    typer.echo(f"foxglove:       ws://127.0.0.1:{server.port} (Foxglove WebSocket protocol, loopback only)")
+    return server, published
 
 
 def log_header(

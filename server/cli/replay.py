@@ -1,9 +1,9 @@
-"""`skyring replay LOG`: a recorded flight, summarised (`--summary`) or played back in the operator's view.
+"""`skyring replay LOG`: a recorded flight (MCAP), summarised (`--summary`), its audit trail printed
+(`--audit`), or played back in the operator's view.
 
-The playback turns every state sample back into the `SceneView` the live station drew
-(`log_records.scene_from`) and hands it to the same `webui.app.OperatorUi`, so a replay looks like the live
-page; its controls are there but every command is refused (a replay flies nothing). Operator commands are
-printed as the playback passes them.
+The log records the `SceneView` the live station drew, so the playback hands each one to the same
+`webui.app.OperatorUi` and a replay looks like the live page; its controls are there but every command is
+refused (a replay flies nothing). Operator commands are printed as the playback passes them.
 """
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING, Annotated, NoReturn
 
 import typer
 
-from server.flightlog.log import FlightLogError, FlightRecord, read_flight_log
-from server.flightlog.records import LogCommand, LogSample, scene_from
+from server.flightlog.reader import FlightLogError, FlightRecord, read_flight_log
+from server.flightlog.records import AuditRecord
+from webui.view import SceneView
 
 if TYPE_CHECKING:
     from webui.app import OperatorUi
-    from webui.view import SceneView
 
 
 # ---- summary ----------------------------------------------------------------------------------------------
@@ -44,7 +44,7 @@ class Closest:
 class Summary:
     """What a flight log holds: duration_s from the first to the last sample, the vehicle ids seen, commands
     accepted and refused, the closest approach of two airborne MAVs (None with fewer than two in the air),
-    lines skipped because they were cut short, and whether the run ended cleanly (an end record)."""
+    whether the file was cut short, messages that did not decode, and whether the run ended cleanly."""
 
     duration_s: float
     samples: int
@@ -52,11 +52,12 @@ class Summary:
     accepted: int
     refused: int
     closest: Closest | None
-    truncated_lines: int
+    truncated: bool
+    bad_messages: int
     clean_end: bool
 
 
-def closest_approach(samples: Sequence[LogSample]) -> Closest | None:
+def closest_approach(samples: Sequence[SceneView]) -> Closest | None:
     """The minimum distance between two MAVs that were both in the air, over every sample."""
     best: Closest | None = None
     for sample in samples:
@@ -75,10 +76,11 @@ def summarize(record: FlightRecord) -> Summary:
         duration_s=samples[-1].time_s - samples[0].time_s if samples else 0.0,
         samples=len(samples),
         vehicle_ids=tuple(ids),
-        accepted=sum(c.accepted for c in record.commands),
-        refused=sum(not c.accepted for c in record.commands),
+        accepted=sum(c.accepted for c in record.audit),
+        refused=sum(not c.accepted for c in record.audit),
         closest=closest_approach(samples),
-        truncated_lines=record.truncated_lines,
+        truncated=record.truncated,
+        bad_messages=record.bad_messages,
         clean_end=record.end is not None,
     )
 
@@ -104,7 +106,8 @@ def summary_table(record: FlightRecord) -> str:
         ("vehicles", f"{len(s.vehicle_ids)} ({', '.join(map(str, s.vehicle_ids)) or 'none sampled'})"),
         ("commands", f"{s.accepted} accepted, {s.refused} refused"),
         ("min separation", closest),
-        ("truncated lines", str(s.truncated_lines)),
+        ("cut short", "yes (read up to the cut)" if s.truncated else "no"),
+        ("bad messages", str(s.bad_messages)),
         (
             "ended",
             "cleanly" if s.clean_end else "without an end record (the ground station crashed or was killed)",
@@ -113,11 +116,20 @@ def summary_table(record: FlightRecord) -> str:
     return "\n".join(f"{name:<16} {value}" for name, value in rows)
 
 
-def command_line(command: LogCommand) -> str:
-    """One operator command as printed during a replay."""
-    args = ", ".join(f"{k}={v}" for k, v in command.arguments)
-    outcome = "accepted" if command.accepted else f"REFUSED: {command.message}"
-    return f"{command.time_s:8.1f} s  {command.name}({args}): {outcome}"
+def command_line(record: AuditRecord) -> str:
+    """One audit record as printed by --audit and during a replay: time, command, who, from where, outcome."""
+    args = ", ".join(f"{k}={v}" for k, v in record.arguments.items())
+    who = f"{record.operator or '(not signed in)'} [{record.role or '-'}] via {record.surface}"
+    where = f" from {record.remote}" if record.remote else ""
+    outcome = "accepted" if record.accepted else f"REFUSED: {record.message}"
+    head = f"{record.time_s:8.1f} s  {record.utc}  {record.command_id:<12} {who}{where}"
+    return f"{head}  {record.command}({args}): {outcome}"
+
+
+def audit_table(record: FlightRecord) -> str:
+    """The `--audit` listing: every command, accepted or refused, in order."""
+    lines = [command_line(r) for r in record.audit]
+    return "\n".join(lines) if lines else "no operator commands recorded"
 
 
 # ---- playback ---------------------------------------------------------------------------------------------
@@ -143,7 +155,7 @@ def play(
     publish: Callable[[SceneView], None],
     speed: float,
     stop: threading.Event,
-    on_command: Callable[[LogCommand], None] | None = None,
+    on_command: Callable[[AuditRecord], None] | None = None,
     clock: Callable[[], float] = time.monotonic,
 ) -> int:
     """Publish the samples at `speed` times the mission-time spacing they were recorded at, and pass each
@@ -152,7 +164,7 @@ def play(
     samples = record.samples
     if not samples:
         return 0
-    commands = iter(record.commands)
+    commands = iter(record.audit)
     pending = next(commands, None)
     t0, wall0 = samples[0].time_s, clock()
     for published, sample in enumerate(samples):
@@ -163,7 +175,7 @@ def play(
             if on_command is not None:
                 on_command(pending)
             pending = next(commands, None)
-        publish(scene_from(sample))
+        publish(sample)
     while pending is not None:  # commands after the last sample (the shutdown, typically)
         if on_command is not None:
             on_command(pending)
@@ -179,16 +191,14 @@ def serve_replay(
     speed: float = 1.0,
     stop: threading.Event,
     on_ready: Callable[[str, OperatorUi], None] | None = None,
-    on_command: Callable[[LogCommand], None] | None = None,
+    on_command: Callable[[AuditRecord], None] | None = None,
     on_end: Callable[[], None] | None = None,
 ) -> int:
     """Serve the operator page and play `record` on it, then hold the last frame until `stop` is set.
     on_ready(url, ui) runs once the page listens. Returns the samples published."""
     from webui.app import OperatorUi  # viser loads only for a playback
 
-    ui = OperatorUi(
-        actions=ReplayActions(record.path), initial=scene_from(record.samples[0]), host=host, port=viser_port
-    )
+    ui = OperatorUi(actions=ReplayActions(record.path), initial=record.samples[0], host=host, port=viser_port)
     try:
         if on_ready is not None:
             on_ready(f"http://{host}:{ui.port}/", ui)
@@ -206,8 +216,11 @@ def serve_replay(
 
 
 def replay(
-    path: Annotated[Path, typer.Argument(help="flight log written by skyring serve (runs/flight-*.jsonl)")],
+    path: Annotated[Path, typer.Argument(help="flight log written by skyring serve (runs/flight-*.mcap)")],
     summary: Annotated[bool, typer.Option("--summary", help="print a short table and exit")] = False,
+    audit: Annotated[
+        bool, typer.Option("--audit", help="print every operator command (who, where, outcome) and exit")
+    ] = False,
     speed: Annotated[float, typer.Option(help="recorded seconds per wall second")] = 1.0,
     viser_port: Annotated[
         int, typer.Option(help="operator page (viser) port; the next free one if busy")
@@ -223,8 +236,11 @@ def replay(
     except FlightLogError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=1) from None
-    if summary:
-        typer.echo(summary_table(record))
+    if summary or audit:
+        if summary:
+            typer.echo(summary_table(record))
+        if audit:
+            typer.echo(audit_table(record))
         return
     if not record.samples:
         typer.echo(f"error: {path}: the flight log has no state samples to replay", err=True)

@@ -1,6 +1,6 @@
 """`skyring serve`: the ground station over the embedded simulation (default) in real time.
 
-Prints the operator URL (viser) and the API URL as soon as both listen. The station is built by
+Prints the operator URL and the API URL as soon as both listen. The station is built by
 `build_station`; other back-ends (PX4 through MAVSDK) build their autopilots and hand the same ground station
 a mission over them, then call `run`. Unless `--no-log`, the run is recorded in a flight log
 (`server.flightlog.log`; `skyring replay` plays it back), opened before anything flies so a log that cannot be
@@ -19,8 +19,16 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from controller.params import Method, ParameterError
-from server.cli.log_options import describe_log, log_header, log_path_option, open_log
+from server.cli.log_options import (
+    describe_log,
+    log_header,
+    log_line,
+    log_path_option,
+    open_log,
+    start_foxglove,
+)
 from server.cli.options import OPTION_OF_FIELD, MethodOption, Person, PersonMode, Rate, Seed, Trees, Vehicles
+from server.cli.security_options import security_options
 from server.settings import RunSettings
 
 if TYPE_CHECKING:
@@ -44,10 +52,17 @@ def build_station(settings: RunSettings):
 
 
 def run(
-    station, *, host: str, port: int, viser_port: int, speed: float, flight_log: FlightLog | None = None
+    station,
+    *,
+    host: str,
+    port: int,
+    viser_port: int,
+    speed: float,
+    flight_log: FlightLog | None = None,
+    **serve_options,
 ) -> None:
     """Serve `station` until Ctrl-C / SIGTERM; the MAVs are told to land on the way out. `flight_log`, when
-    given, records the whole run and is closed here."""
+    given, records the whole run and is closed here. serve_options go to `serve_station` (gate, TLS)."""
     from server.station.live import Urls, serve_station
 
     def ready(urls: Urls, _ui: object) -> None:
@@ -55,19 +70,33 @@ def run(
             typer.echo(f"port {port} is busy: the API uses {urls.api} instead")
         if urls.viser_fell_back:
             typer.echo(f"port {viser_port} is busy: the operator page uses {urls.operator} instead")
-        typer.echo(f"operator view:  {urls.operator}")
+        typer.echo(f"operator view:  {urls.api}  (3-D page alone: {urls.operator})")
         typer.echo(
-            f"API and docs:   {urls.api}  ({urls.api}docs, state at {urls.api}api/state, stream at "
+            f"API and docs:   {urls.api}docs  (state at {urls.api}api/state, stream at "
             f"{urls.api.replace('http', 'ws', 1)}ws)"
         )
-        typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
+        gate = serve_options.get("gate")
+        typer.echo(
+            "sign-in:        required (users file)"
+            if gate is not None and not gate.open
+            else "sign-in:        off (loopback only: anyone on this machine is the operator)"
+        )
+        typer.echo(log_line(flight_log))
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
     if flight_log is not None:
         station.attach_log(flight_log)
     try:
         stats = asyncio.run(
-            serve_station(station, host=host, port=port, viser_port=viser_port, speed=speed, on_ready=ready)
+            serve_station(
+                station,
+                host=host,
+                port=port,
+                viser_port=viser_port,
+                speed=speed,
+                on_ready=ready,
+                **serve_options,
+            )
         )
     finally:
         if flight_log is not None:
@@ -77,7 +106,7 @@ def run(
         + (f", fell behind {stats.lagged} times" if stats.lagged else "")
         + ")"
     )
-    if flight_log is not None:
+    if flight_log is not None and flight_log.recording:
         typer.echo(describe_log(flight_log))
 
 
@@ -90,7 +119,10 @@ def serve(
     host: Annotated[str, typer.Option(help="address to listen on (0.0.0.0: every interface)")] = "127.0.0.1",
     port: Annotated[int, typer.Option(min=0, max=65535, help="API port; a free one is used if busy")] = 8000,
     viser_port: Annotated[
-        int, typer.Option(min=0, max=65535, help="operator page (viser) port; the next free one if busy")
+        int,
+        typer.Option(
+            min=0, max=65535, help="viser's internal port on 127.0.0.1 (the page is served through --port)"
+        ),
     ] = 8080,
     vehicles: Vehicles = 3,
     seed: Seed = 0,
@@ -117,11 +149,29 @@ def serve(
         Path | None,
         typer.Option(
             "--log",
-            help="flight log to write (JSON Lines) [default: runs/flight-<UTC time>.jsonl]",
+            help="flight log to write (MCAP) [default: runs/flight-<UTC time>.mcap]",
             dir_okay=False,
         ),
     ] = None,
     no_log: Annotated[bool, typer.Option("--no-log", help="do not write a flight log")] = False,
+    users: Annotated[
+        Path | None,
+        typer.Option(
+            help="users file (`skyring users add`): sign-in required; needed beyond loopback "
+            "[env: SKYRING_USERS_FILE, or SKYRING_USERS with the lines]",
+            dir_okay=False,
+        ),
+    ] = None,
+    tls_cert: Annotated[Path | None, typer.Option(help="serve HTTPS: certificate chain (PEM)")] = None,
+    tls_key: Annotated[Path | None, typer.Option(help="serve HTTPS: private key (PEM)")] = None,
+    foxglove: Annotated[
+        int | None,
+        typer.Option(
+            min=0,
+            max=65535,
+            help="also serve the log's channels live to Foxglove on 127.0.0.1:PORT (0: a free port)",
+        ),
+    ] = None,
     agents: Annotated[
         str,
         typer.Option(
@@ -151,6 +201,7 @@ def serve(
         )
     except ParameterError as exc:
         raise typer.BadParameter(exc.reason, param_hint=OPTION_OF_FIELD.get(exc.field, exc.field)) from None
+    secure = security_options(host=host, users=users, tls_cert=tls_cert, tls_key=tls_key)
     if agents not in ("in-process", "zenoh", "spawn"):
         raise typer.BadParameter(f"must be in-process, zenoh or spawn, got {agents!r}", param_hint="--agents")
     if agents != "in-process":
@@ -181,6 +232,8 @@ def serve(
             port=port,
             viser_port=viser_port,
             log_path=log_path,
+            foxglove_port=foxglove,
+            **secure,
         )
         return
     if px4 or px4_sitl:
@@ -194,19 +247,29 @@ def serve(
             viser_port=viser_port,
             speed=speed,
             log_path=log_path,
+            foxglove_port=foxglove,
+            **secure,
         )
         return
-    flight_log = None
-    if log_path is not None:
-        flight_log = open_log(log_path, header=log_header(settings, command="serve", speed=speed))
+    header = log_header(settings, command="serve", speed=speed)
+    flight_log = None if log_path is None else open_log(log_path, header=header)
+    fox, flight_log = start_foxglove(foxglove, flight_log=flight_log, header=header)
     try:
         station = build_station(settings)
     except BaseException:
         if flight_log is not None:
             flight_log.close()
+        if fox is not None:
+            fox.stop()
         raise
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    run(station, host=host, port=port, viser_port=viser_port, speed=speed, flight_log=flight_log)
+    try:
+        run(
+            station, host=host, port=port, viser_port=viser_port, speed=speed, flight_log=flight_log, **secure
+        )
+    finally:
+        if fox is not None:
+            fox.stop()
 
 
 def run_px4(
@@ -220,6 +283,8 @@ def run_px4(
     viser_port: int,
     speed: float,
     log_path: Path | None = None,
+    foxglove_port: int | None = None,
+    **serve_options,
 ) -> None:
     """`skyring serve --px4 URL ... | --px4-sitl N [--origin lat,lon,alt]`: validate, connect, serve until
     Ctrl-C / SIGTERM, land every MAV on the way out. `--px4` may be repeated or hold comma-separated URLs.
@@ -244,18 +309,14 @@ def run_px4(
 
     def ready(urls_: Urls, _ui: object) -> None:
         typer.echo(f"PX4 vehicles:   {', '.join(urls)}")
-        typer.echo(f"operator view:  {urls_.operator}")
-        typer.echo(f"API and docs:   {urls_.api}  ({urls_.api}docs)")
-        typer.echo(f"flight log:     {flight_log.name}" if flight_log is not None else "flight log:     off")
+        typer.echo(f"operator view:  {urls_.api}  (3-D page alone: {urls_.operator})")
+        typer.echo(f"API and docs:   {urls_.api}docs")
+        typer.echo(log_line(flight_log))
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
-    flight_log = (
-        None
-        if log_path is None
-        else open_log(
-            log_path, header=log_header(settings, command="serve --px4", speed=1.0, vehicle_urls=urls)
-        )
-    )
+    header = log_header(settings, command="serve --px4", speed=1.0, vehicle_urls=urls)
+    flight_log = None if log_path is None else open_log(log_path, header=header)
+    fox, flight_log = start_foxglove(foxglove_port, flight_log=flight_log, header=header)
     from controller.warmup import warm_up
 
     warm_up()  # the compiled kernels, before the first tick (compiles once on a fresh install)
@@ -275,6 +336,7 @@ def run_px4(
                 viser_port=viser_port,
                 on_ready=ready,
                 flight_log=flight_log,
+                **serve_options,
             )
         )
     except Px4Error as exc:
@@ -283,6 +345,8 @@ def run_px4(
     finally:
         if flight_log is not None:
             flight_log.close()
+        if fox is not None:
+            fox.stop()
     typer.echo(f"stopped after {stats.ticks} control ticks")
-    if flight_log is not None:
+    if flight_log is not None and flight_log.recording:
         typer.echo(describe_log(flight_log))

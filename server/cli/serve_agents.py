@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 
 from controller.params import Method
-from server.cli.log_options import describe_log, open_log
+from server.cli.log_options import describe_log, log_line, open_log, start_foxglove
 from vehicles.autopilot import Autopilot
 
 log = logging.getLogger(__name__)
@@ -34,8 +34,12 @@ def run_agents(
     port: int,
     viser_port: int,
     log_path: Path | None,
+    foxglove_port: int | None = None,
+    **serve_options,
 ) -> None:
-    """Serve the station over agents on Zenoh (`mode` "zenoh") or the rehearsal (`mode` "spawn")."""
+    """Serve the station over agents on Zenoh (`mode` "zenoh") or the rehearsal (`mode` "spawn").
+    foxglove_port: also publish the log's channels to Foxglove on 127.0.0.1; serve_options go to
+    `serve_station` (gate, TLS)."""
     from server.flightlog.log import DEFAULT_SAMPLE_RATE_HZ, utc_now_iso
     from server.flightlog.records import LogHeader
     from server.station.agents_mode import STATION_RATE_HZ
@@ -48,24 +52,21 @@ def run_agents(
     if px4:
         vehicles = len(px4)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    flight_log = None
-    if log_path is not None:
-        flight_log = open_log(
-            log_path,
-            header=LogHeader(
-                command=f"serve --agents {mode}",
-                vehicles=vehicles,
-                seed=seed,
-                method=Method(method).value,
-                trees=trees,
-                person=person,
-                rate_hz=STATION_RATE_HZ,
-                speed=1.0,
-                sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
-                started_utc=utc_now_iso(),
-                vehicle_urls=tuple(px4),
-            ),
-        )
+    header = LogHeader(
+        command=f"serve --agents {mode}",
+        vehicles=vehicles,
+        seed=seed,
+        method=Method(method).value,
+        trees=trees,
+        person=person,
+        rate_hz=STATION_RATE_HZ,
+        speed=1.0,
+        sample_rate_hz=DEFAULT_SAMPLE_RATE_HZ,
+        started_utc=utc_now_iso(),
+        vehicle_urls=tuple(px4),
+    )
+    flight_log = None if log_path is None else open_log(log_path, header=header)
+    fox, flight_log = start_foxglove(foxglove_port, flight_log=flight_log, header=header)
     try:
         asyncio.run(
             serve_agents(
@@ -82,12 +83,16 @@ def run_agents(
                 port=port,
                 viser_port=viser_port,
                 flight_log=flight_log,
+                **serve_options,
             )
         )
     finally:
         if flight_log is not None:
             flight_log.close()
-            typer.echo(describe_log(flight_log))
+            if flight_log.recording:
+                typer.echo(describe_log(flight_log))
+        if fox is not None:
+            fox.stop()
 
 
 async def serve_agents(
@@ -106,6 +111,7 @@ async def serve_agents(
     viser_port: int,
     flight_log=None,
     stop: asyncio.Event | None = None,
+    **serve_options,
 ) -> None:
     from server.station.agents_mode import build_spawn_station, build_zenoh_station
     from server.station.live import Urls, serve_station
@@ -151,13 +157,26 @@ async def serve_agents(
         show_camera_reports(agents.bus, ui.server)  # type: ignore[attr-defined] - a webui.app.OperatorUi
         where = "spawned on 127.0.0.1" if mode == "spawn" else f"team {config.team} on Zenoh"
         typer.echo(f"agents:         {vehicles} ({where})")
-        typer.echo(f"operator view:  {urls.operator}")
-        typer.echo(f"API and docs:   {urls.api}  ({urls.api}docs)")
+        typer.echo(f"operator view:  {urls.api}  (3-D page alone: {urls.operator})")
+        typer.echo(f"API and docs:   {urls.api}docs")
+        gate = serve_options.get("gate")
+        typer.echo(
+            "sign-in:        required (users file)"
+            if gate is not None and not gate.open
+            else "sign-in:        off (loopback only: anyone on this machine is the operator)"
+        )
+        typer.echo(log_line(flight_log))
         typer.echo("Ctrl-C to stop (every MAV is told to land).")
 
     try:
         await serve_station(
-            agents.station, host=host, port=port, viser_port=viser_port, on_ready=ready, stop=stop
+            agents.station,
+            host=host,
+            port=port,
+            viser_port=viser_port,
+            on_ready=ready,
+            stop=stop,
+            **serve_options,
         )
     finally:
         agents.close()

@@ -1,10 +1,12 @@
-"""The flight log of a ground-station run: a JSON Lines file that survives a crash, and its reader.
+"""The flight log of a ground-station run: an MCAP file written through the Foxglove SDK (`channels.py`
+lists its channels), which opens in Foxglove with a 3-D panel of the operator's scene.
 
-Why it is crash-safe: every record is encoded first and handed to the kernel in one `os.write` of a whole line
-(no buffer in this process), so a crash of the ground station loses nothing already recorded; the file is
-fsynced at most once a second (and on close) so a power cut loses at most about a second. A line cut short
-(power cut, or a failed write on a full disk) is skipped and counted by the reader; after a failed write the
-next record starts on a fresh line so one bad write never spoils the next record.
+What a crash loses: the SDK collects messages into a chunk in memory; this writer closes the chunk and hands
+it to the kernel (`flush`) every `FLUSH_PERIOD_S` and right after every audit record, and fsyncs the file at
+that period, so a kill -9 of the ground station loses at most the last second of state samples and no audit
+record (measured by the kill -9 test in `tests/server/flightlog/test_flight_log.py`); a power cut can also
+lose what was flushed but not yet fsynced, under a second more. A log cut short has no summary section: the
+reader (`server.flightlog.reader`) reads it record by record up to the cut.
 
 Why it never stops the MAVs: every failure to build or write a record is caught here, logged once and
 counted (`write_errors`); the ground station keeps flying without the records it could not write.
@@ -12,117 +14,101 @@ counted (`write_errors`); the ground station keeps flying without the records it
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Protocol
+from typing import BinaryIO
 
-from server.flightlog.records import (
-    LogCommand,
-    LogEnd,
-    LogHeader,
-    LogSample,
-    RecordError,
-    check_format,
-)
+import foxglove
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+from server.flightlog.channels import SkyringChannels
+from server.flightlog.records import AuditRecord, LogEnd, LogHeader
+from webui.view import SceneView
 
 log = logging.getLogger(__name__)
 
 DEFAULT_SAMPLE_RATE_HZ = 5.0
-SYNC_PERIOD_S = 1.0
-
-
-class LogSink(Protocol):
-    """Where the lines go: `write` takes whole encoded lines, `sync` makes them durable."""
-
-    def write(self, data: bytes) -> None: ...
-
-    def sync(self) -> None: ...
-
-    def close(self) -> None: ...
-
-
-class FileSink:
-    """An append-only file written with unbuffered `os.write` calls (each record reaches the kernel whole)."""
-
-    def __init__(self, path: Path) -> None:
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
-
-    def write(self, data: bytes) -> None:
-        view = memoryview(data)
-        while view:
-            written = os.write(self._fd, view)
-            view = view[written:]
-
-    def sync(self) -> None:
-        os.fsync(self._fd)
-
-    def close(self) -> None:
-        os.close(self._fd)
+FLUSH_PERIOD_S = 0.75  # plus one 0.2 s sample period: a kill -9 loses under a second
+CHUNK_SIZE_BYTES = 256 * 1024  # a chunk is closed sooner by the once-a-second flush at the default rates
 
 
 def default_log_path(now: datetime | None = None) -> Path:
-    """runs/flight-<UTC timestamp>.jsonl, relative to the working directory."""
+    """runs/flight-<UTC timestamp>.mcap, relative to the working directory."""
     stamp = (now or datetime.now(UTC)).strftime("%Y%m%dT%H%M%SZ")
-    return Path("runs") / f"flight-{stamp}.jsonl"
+    return Path("runs") / f"flight-{stamp}.mcap"
 
 
 def utc_now_iso() -> str:
-    return datetime.now(UTC).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 class FlightLog:
-    """Writes one flight log: the header at once, then commands, periodic samples and, on close, the end.
+    """Publishes a run on the skyring channels of a Foxglove context and, given a file, records them as MCAP.
 
-    sample_period_s: mission seconds between state samples (a sample is taken on the first tick at or after
-    each multiple of it from the first sample). clock: wall clock for the once-a-second fsync. Thread-safe.
-    Use `FlightLog.create(path, ...)` for a file; the constructor takes any `LogSink`.
+    The header goes out at once; then state samples (`record_sample`, every `sample_period_s` of mission
+    time), audit records and, on close, the end record. clock: wall clock of the once-a-second flush;
+    wall_ns: the log time of each message. Thread-safe. `FlightLog.create(path, ...)` records to a file;
+    `FlightLog(header=..., file=None)` only publishes (for a live Foxglove client without a log).
     """
 
     def __init__(
         self,
         *,
-        sink: LogSink,
         header: LogHeader,
+        file: BinaryIO | None = None,
         name: str = "flight log",
+        context: foxglove.Context | None = None,
         clock: Callable[[], float] = time.monotonic,
+        wall_ns: Callable[[], int] = time.time_ns,
     ) -> None:
         if not (math.isfinite(header.sample_rate_hz) and header.sample_rate_hz > 0):
             raise ValueError(f"sample rate must be a positive number of Hz, got {header.sample_rate_hz}")
         self.name = name
         self.header = header
         self.sample_period_s = 1.0 / header.sample_rate_hz
-        self._sink = sink
+        self.context = context or foxglove.Context()
+        self._file = file
         self._clock = clock
+        self._wall_ns = wall_ns
         self._lock = threading.Lock()
-        self._first_sample_s: float | None = None
         self._next_sample_s: float | None = None
+        self._first_sample_s: float | None = None
         self._last_time_s = math.nan
-        self._last_sync = clock()
-        self._broken_line = False
+        self._last_flush = clock()
         self._closed = False
         self.samples = 0
-        self.commands = 0
+        self.audit_records = 0
         self.write_errors = 0
-        self._write(header.to_json(), raise_errors=True)  # a log that cannot even start is refused up front
+        self._writer = None
+        if file is not None:
+            options = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=CHUNK_SIZE_BYTES)
+            self._writer = foxglove.open_mcap(file, context=self.context, writer_options=options)
+        self.channels = SkyringChannels(self.context)
+        self.channels.log_header(header, self._wall_ns())
+        self._flush(sync=True, raise_errors=True)  # a log that cannot even start is refused up front
+
+    @property
+    def recording(self) -> bool:
+        """Whether this log writes a file (False: it only publishes, to a live Foxglove client)."""
+        return self._file is not None
 
     @classmethod
-    def create(cls, path: Path, *, header: LogHeader) -> FlightLog:
-        """Open `path` for appending (creating its folder) and write the header; OSError if impossible."""
+    def create(cls, path: Path, *, header: LogHeader, context: foxglove.Context | None = None) -> FlightLog:
+        """Create `path` (and its folder; an existing file is refused) and write the header; OSError if that
+        is impossible."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        sink = FileSink(path)
+        file = open(path, "xb")  # noqa: SIM115 - owned by the log, closed in close()
         try:
-            return cls(sink=sink, header=header, name=str(path))
+            return cls(header=header, file=file, name=str(path), context=context)
         except BaseException:
-            sink.close()
+            file.close()
             raise
 
     # ---- recording (never raises) ------------------------------------------------------------------------
@@ -130,77 +116,87 @@ class FlightLog:
         """Whether a state sample is due at mission time time_s."""
         return self._next_sample_s is None or time_s >= self._next_sample_s - 1e-9
 
-    def record_sample(self, build: Callable[[], LogSample]) -> None:
-        """Record the sample `build()` makes (a failure to build it is counted like a failed write)."""
+    def record_sample(self, build: Callable[[], SceneView]) -> None:
+        """Record the operator's view `build()` makes (a failure to build it counts as a failed write)."""
         try:
-            sample = build()
+            view = build()
         except Exception:  # noqa: BLE001 - recording must never stop the control loop
             self._failed("building a state sample failed")
             return
         with self._lock:
-            if self._first_sample_s is None or not math.isfinite(self._first_sample_s):
-                self._first_sample_s = sample.time_s
-            if math.isfinite(sample.time_s):  # the next multiple of the period after this sample
-                k = math.floor((sample.time_s - self._first_sample_s) / self.sample_period_s + 1e-6) + 1
+            if self._closed:
+                return
+            if self._first_sample_s is None and math.isfinite(view.time_s):
+                self._first_sample_s = view.time_s
+            if self._first_sample_s is not None and math.isfinite(view.time_s):
+                k = math.floor((view.time_s - self._first_sample_s) / self.sample_period_s + 1e-6) + 1
                 self._next_sample_s = self._first_sample_s + k * self.sample_period_s
-        if self._write(sample.to_json()):
+            try:
+                self.channels.log_view(view, self._wall_ns())
+            except Exception:  # noqa: BLE001
+                self._count_error("writing a state sample failed", exc_info=True)
+                return
             self.samples += 1
-        self._last_time_s = sample.time_s
+            self._last_time_s = view.time_s
+            if self._clock() - self._last_flush >= FLUSH_PERIOD_S:
+                self._flush(sync=True)
 
-    def record_command(self, command: LogCommand) -> None:
-        """Record one operator command and its outcome."""
-        if self._write(command.to_json()):
-            self.commands += 1
-        self._last_time_s = command.time_s
-
-    def close(self) -> None:
-        """Write the end record, fsync and close (idempotent)."""
+    def record_audit(self, record: AuditRecord) -> None:
+        """Record one operator command and its outcome, and hand it to the kernel at once."""
         with self._lock:
             if self._closed:
                 return
-        end = LogEnd(
-            time_s=self._last_time_s,
-            samples=self.samples,
-            commands=self.commands,
-            write_errors=self.write_errors,
-        )
-        self._write(end.to_json())
-        with self._lock:
-            self._closed = True
-            for action in (self._sink.sync, self._sink.close):
-                try:
-                    action()
-                except OSError as exc:
-                    self._count_error(f"closing failed: {exc}")
+            try:
+                self.channels.log_audit(record, self._wall_ns())
+            except Exception:  # noqa: BLE001
+                self._count_error("writing an audit record failed", exc_info=True)
+                return
+            self.audit_records += 1
+            if math.isfinite(record.time_s):
+                self._last_time_s = record.time_s
+            self._flush(sync=self._clock() - self._last_flush >= FLUSH_PERIOD_S)
 
-    # ---- internals ----------------------------------------------------------------------------------------
-    def _write(self, record: dict[str, Any], *, raise_errors: bool = False) -> bool:
-        try:
-            line = json.dumps(record, allow_nan=False, separators=(",", ":")) + "\n"
-        except (TypeError, ValueError):
-            if raise_errors:
-                raise
-            self._failed(f"a {record.get('kind')} record could not be encoded")
-            return False
-        data = line.encode()
+    def close(self, stats: dict[str, float] | None = None) -> None:
+        """Write the end record, finish the MCAP file (summary and footer), fsync and close (idempotent)."""
         with self._lock:
             if self._closed:
-                return False
+                return
+            self._closed = True
+            end = LogEnd(
+                time_s=self._last_time_s,
+                samples=self.samples,
+                audit_records=self.audit_records,
+                write_errors=self.write_errors,
+                stats=dict(stats or {}),
+            )
             try:
-                # a record after a failed write starts on a fresh line: the failed one may have been cut short
-                self._sink.write(b"\n" + data if self._broken_line else data)
-                self._broken_line = False
-                now = self._clock()
-                if now - self._last_sync >= SYNC_PERIOD_S:
-                    self._last_sync = now
-                    self._sink.sync()
-            except OSError as exc:
-                if raise_errors:
-                    raise
-                self._broken_line = True
-                self._count_error(f"writing failed: {exc}")
-                return False
-        return True
+                self.channels.log_end(end, self._wall_ns())
+                if self._writer is not None:
+                    self._writer.close()
+                if self._file is not None:
+                    self._file.flush()
+                    os.fsync(self._file.fileno())
+            except Exception as exc:  # noqa: BLE001
+                self._count_error(f"closing failed: {exc}")
+            finally:
+                self.channels.close()
+                if self._file is not None:
+                    self._file.close()
+
+    # ---- internals ----------------------------------------------------------------------------------------
+    def _flush(self, *, sync: bool, raise_errors: bool = False) -> None:
+        if self._writer is None or self._file is None:
+            return
+        try:
+            self._writer.flush()
+            self._file.flush()
+            if sync:
+                os.fsync(self._file.fileno())
+                self._last_flush = self._clock()
+        except Exception as exc:  # noqa: BLE001
+            if raise_errors:
+                raise
+            self._count_error(f"writing failed: {exc}")
 
     def _failed(self, what: str) -> None:
         with self._lock:
@@ -215,76 +211,3 @@ class FlightLog:
                 what,
                 exc_info=exc_info,
             )
-
-
-# ---- reading ----------------------------------------------------------------------------------------------
-
-
-class FlightLogError(ValueError):
-    """A file that is not a readable flight log; the message names the file and says why."""
-
-
-@dataclass(frozen=True)
-class FlightRecord:
-    """A flight log read back: the header, the samples and commands in file order, the end record (None when
-    the run did not stop cleanly), and how many lines were cut short or damaged and skipped."""
-
-    path: Path
-    header: LogHeader
-    samples: tuple[LogSample, ...]
-    commands: tuple[LogCommand, ...]
-    end: LogEnd | None
-    truncated_lines: int
-
-
-def read_flight_log(path: Path) -> FlightRecord:
-    """Read a flight log. FlightLogError (naming the file) if it is missing, unreadable, does not start with a
-    flight-log header or has an unsupported version; lines cut short later on are skipped and counted."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FlightLogError(f"{path}: cannot read the flight log ({exc.strerror or exc})") from None
-    lines = data.split(b"\n")
-    try:
-        first = json.loads(lines[0])
-        check_format(first)
-        header = LogHeader.from_json(first)
-    except (ValueError, RecordError) as exc:  # json.JSONDecodeError and UnicodeDecodeError are ValueErrors
-        reason = str(exc) if isinstance(exc, RecordError) else "the first line is not JSON"
-        raise FlightLogError(f"{path}: not a skyring flight log: {reason}") from None
-    samples: list[LogSample] = []
-    commands: list[LogCommand] = []
-    end: LogEnd | None = None
-    truncated = 0
-    readers: dict[str, Callable[[dict[str, Any]], object]] = {
-        "sample": LogSample.from_json,
-        "command": LogCommand.from_json,
-        "end": LogEnd.from_json,
-    }
-    for raw in lines[1:]:
-        if not raw.strip():
-            continue
-        try:
-            obj = json.loads(raw)
-            kind = obj.get("kind") if isinstance(obj, dict) else None
-            if kind not in readers:
-                continue  # a record kind added by a newer skyring: not ours to judge
-            record = readers[kind](obj)
-        except (ValueError, RecordError):
-            truncated += 1
-            continue
-        if isinstance(record, LogSample):
-            samples.append(record)
-        elif isinstance(record, LogCommand):
-            commands.append(record)
-        elif isinstance(record, LogEnd):
-            end = record
-    return FlightRecord(
-        path=path,
-        header=header,
-        samples=tuple(samples),
-        commands=tuple(commands),
-        end=end,
-        truncated_lines=truncated,
-    )

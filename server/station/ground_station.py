@@ -1,10 +1,13 @@
 """The ground station's core: owns a live `Mission`, runs its control ticks, validates every operator command
 before anything changes, and turns mission snapshots into the operator's view.
 
-The REST API and the viser GUI call the same methods here (it satisfies `webui.view.OperatorActions`), so
-there is one path for every command. Ticks and commands are serialised by one lock: viser calls back from
+The REST API, the WebSocket and the viser GUI call the same methods here (it satisfies
+`webui.view.OperatorActions`), so there is one path for every command: each runs on behalf of the
+`webui.access.current_principal()` its surface set, is refused unless that principal is an operator, and is
+audited (accepted or refused, with who, from where and its command id) in the flight log. Ticks and
+commands are serialised by one lock: viser calls back from
 its own threads, the API and the live runner from the asyncio loop. With a flight log attached
-(`attach_log`), every command with its outcome and a state sample every few ticks are recorded from here. The
+(`attach_log`), every command's audit record and a state sample every few ticks are recorded from here. The
 mission may fly any list of autopilots (the embedded simulation or PX4 vehicles): nothing here knows which.
 
 Every `alert_period_s` of mission time the station reads the alert conditions off the operator's view
@@ -20,14 +23,15 @@ import logging
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from controller.messages import Obstacle
-from server.flightlog.log import FlightLog
-from server.flightlog.records import LogCommand, LogSample, sample_from, scalar
+from server.flightlog.log import FlightLog, utc_now_iso
+from server.flightlog.records import AuditRecord, scalar
 from server.station.alert_rules import AlertParams, conditions
 from server.station.alerts import AlertBook, UnknownAlertError
 from server.station.commands import (
@@ -43,12 +47,17 @@ from server.station.commands import (
 from vehicles.camera import CameraParams
 from vehicles.mission import Mission, MissionError, MissionSnapshot, Phase, VehicleSnapshot
 from vehicles.pilot import AIRBORNE_PHASES, FLYING_PHASES
+from webui.access import Principal, current_principal
 from webui.view import (
     AgentView,
     Alert,
     CameraView,
+    CommandOutcome,
+    Counters,
     GeodeticOrigin,
+    ObstacleView,
     PaceView,
+    PersonEstimateView,
     Range,
     SceneView,
     VehicleView,
@@ -59,41 +68,61 @@ if TYPE_CHECKING:
 
 
 log = logging.getLogger(__name__)
+AUDIT_MEMORY = 1000  # audit records kept in memory (the flight log keeps them all)
+
+
+class NotAuthorisedError(CommandError):
+    """The sender may not command: not signed in (`signed_in` False), or signed in as an observer."""
+
+    def __init__(self, message: str, *, signed_in: bool) -> None:
+        super().__init__(message)
+        self.signed_in = signed_in
 
 
 def _recorded(method):
-    """An operator command whose every call goes to the flight log with its outcome (accepted, or refused with
-    the message the operator saw). The GUI and the API call the same methods, so this is the one place every
-    command passes through; it holds the station lock so the log orders commands and ticks as they ran."""
+    """An operator command: refused unless the current principal is an operator, and audited with its outcome
+    (accepted, or refused with the message the operator saw). Every surface calls these methods, so this is
+    the one place every command passes through; it holds the station lock so the log orders commands and
+    ticks as they ran."""
     signature = inspect.signature(method)
 
     @functools.wraps(method)
     def command(self: GroundStation, *args, **kwargs):
+        principal = current_principal()
         with self._lock:
-            if self._log is None:
-                return method(self, *args, **kwargs)
             try:
+                self._authorise(principal)
                 result = method(self, *args, **kwargs)
             except Exception as exc:
+                self._view = None  # the refused-commands counter moved
                 message = str(exc) if isinstance(exc, CommandError) else f"{type(exc).__name__}: {exc}"
-                self._record_command(
+                self.audit(
+                    principal,
                     method.__name__,
-                    lambda: signature.bind(self, *args, **kwargs),
+                    _arguments(signature, self, args, kwargs),
                     accepted=False,
                     message=message,
-                    result=None,
                 )
                 raise
-            self._record_command(
+            self.audit(
+                principal,
                 method.__name__,
-                lambda: signature.bind(self, *args, **kwargs),
+                _arguments(signature, self, args, kwargs),
                 accepted=True,
-                message="",
                 result=result,
             )
             return result
 
     return command
+
+
+def _arguments(signature: inspect.Signature, station, args, kwargs) -> dict[str, Any]:
+    try:
+        bound = signature.bind(station, *args, **kwargs)
+    except TypeError:
+        return {"arguments": repr((args, kwargs))}
+    bound.apply_defaults()  # an override left at False is audited as such
+    return {k: scalar(v) for k, v in bound.arguments.items() if k != "self"}
 
 
 class GroundStation:
@@ -146,6 +175,7 @@ class GroundStation:
         self._snapshot: MissionSnapshot | None = None
         self._view: SceneView | None = None
         self._log: FlightLog | None = None
+        self.recent_audit: deque[AuditRecord] = deque(maxlen=AUDIT_MEMORY)
         self._alert_params = alert_params or AlertParams(safety_distance_m=self._limits.safety_distance_m)
         self._alert_period_s = float(alert_period_s)
         self._alerts = AlertBook()
@@ -187,20 +217,21 @@ class GroundStation:
             if now - self._alerts_read_s >= self._alert_period_s - 1e-9:
                 self._read_alerts(now)
             if self._log is not None and self._log.sample_due(now):
-                self._log.record_sample(self._sample)
+                self._log.record_sample(self.scene_view)
 
     # ---- flight log ---------------------------------------------------------------------------------------
     def attach_log(self, flight_log: FlightLog) -> None:
-        """Record every operator command and a state sample every `flight_log.sample_period_s` of mission time
-        (the first one now) to `flight_log`. Its owner closes it; a failing log never stops a tick."""
+        """Record every operator command's audit record and a state sample every `flight_log.sample_period_s`
+        of mission time (the first one now) to `flight_log`. Its owner closes it; a failing log never stops a
+        tick."""
         with self._lock:
             self._log = flight_log
-            flight_log.record_sample(self._sample)
+            flight_log.record_sample(self.scene_view)
 
     @property
     def recording_path(self) -> str | None:
         """Where the flight log is written (None: not recording)."""
-        return self._log.name if self._log is not None else None
+        return self._log.name if self._log is not None and self._log.recording else None
 
     # ---- alerts and pace ----------------------------------------------------------------------------------
     def _read_alerts(self, now: float) -> None:
@@ -222,23 +253,30 @@ class GroundStation:
             self._pace = pace
             self._view = None
 
-    def _sample(self) -> LogSample:
-        return sample_from(self.snapshot(), self.scene_view())
+    def _authorise(self, principal: Principal) -> None:
+        if principal.may_command:
+            return
+        self._refused += 1
+        if principal.role is None:
+            raise NotAuthorisedError("sign in as an operator to command the MAVs", signed_in=False)
+        raise NotAuthorisedError(
+            f"{principal.name!r} is signed in as {principal.role.value}: only an operator may command",
+            signed_in=True,
+        )
 
-    def _record_command(
+    def audit(
         self,
-        name: str,
-        bind: Callable[[], inspect.BoundArguments],
+        principal: Principal,
+        command: str,
+        arguments: dict[str, Any],
         *,
         accepted: bool,
-        message: str,
-        result: object,
-    ) -> None:
-        flight_log = self._log
-        if flight_log is None:
-            return
+        message: str = "",
+        result: object = None,
+    ) -> AuditRecord | None:
+        """Record one command's audit record (the surfaces call this for commands they refuse before they
+        reach the station: not signed in, a foreign origin, a malformed request). Never raises."""
         try:
-            arguments = tuple((k, scalar(v)) for k, v in bind().arguments.items() if k != "self")
             text = (
                 None
                 if result is None
@@ -246,18 +284,28 @@ class GroundStation:
                 if isinstance(result, list)
                 else str(result)
             )
-            command = LogCommand(
+            record = AuditRecord(
                 time_s=self._time,
-                name=name,
-                arguments=arguments,
+                utc=utc_now_iso(),
+                command=command,
+                arguments={k: scalar(v) for k, v in arguments.items()},
+                operator=principal.name,
+                role=principal.role.value if principal.role is not None else "",
+                surface=principal.surface.value,
+                remote=principal.remote,
+                command_id=principal.command_id,
                 accepted=accepted,
                 message=message,
                 result=text,
             )
-        except Exception:  # noqa: BLE001 - the log must never change a command's outcome
-            log.exception("recording the %s command failed", name)
-            return
-        flight_log.record_command(command)
+        except Exception:  # noqa: BLE001 - the audit must never change a command's outcome
+            log.exception("auditing the %s command failed", command)
+            return None
+        with self._lock:
+            self.recent_audit.append(record)
+            if self._log is not None:
+                self._log.record_audit(record)
+        return record
 
     # ---- reading ------------------------------------------------------------------------------------------
     def snapshot(self) -> MissionSnapshot:
@@ -276,6 +324,7 @@ class GroundStation:
                     limits=self._limits,
                     link_stale_s=self._stale_s,
                     camera=self._camera,
+                    counters=Counters(**self.counters()),
                     alerts=self._alerts.alerts,
                     pace=self._pace,
                     utc_s=self._wall_clock() if self._wall_clock is not None else None,
@@ -599,6 +648,7 @@ def vehicle_view(
         in_air=bool(s.in_air) if s is not None else False,
         in_formation=v.in_formation,
         position_m=s.position_m if s is not None else np.zeros(3),
+        velocity_mps=s.velocity_mps if s is not None else np.zeros(3),
         yaw_rad=s.yaw_rad if s is not None else 0.0,
         link_age_s=age,
         link_stale=age > link_stale_s
@@ -608,7 +658,6 @@ def vehicle_view(
         solver_time_s=v.solver_time_s if v.status is not None else None,
         battery_fraction=s.battery_fraction if s is not None else None,
         plan_positions_m=plan,
-        velocity_mps=s.velocity_mps if s is not None else np.zeros(3),
         plan_age_s=max(0.0, now_s - v.plan.stamp_s) if v.plan is not None and now_s is not None else None,
         distance_to_person_m=distance,
         released=bool(s.released) if s is not None else False,
@@ -635,7 +684,7 @@ def agent_view(link, *, skew_limit_s: float = 0.05) -> AgentView:
         tick_period_p99_error_s=link.tick_period_p99_error_s,
         station_lost=link.station_lost,
         rejected_messages=link.rejected_messages,
-        commands=link.commands,
+        commands=tuple(CommandOutcome(*command) for command in link.commands),
     )
 
 
@@ -645,6 +694,7 @@ def scene_view(
     limits: CommandLimits,
     link_stale_s: float = 1.0,
     camera: CameraView | None = None,
+    counters: Counters | None = None,
     alerts: tuple[Alert, ...] = (),
     pace: PaceView | None = None,
     utc_s: float | None = None,
@@ -672,19 +722,20 @@ def scene_view(
     d_range, h_range = limits.d_des_range_m(max(team, 1)), limits.h_des_range_m()
     person = best[2].position_m if best else truth
     checks = takeoff_checks(snap, limits=limits)
+    vehicles = tuple(
+        vehicle_view(
+            v,
+            link_stale_s=link_stale_s,
+            now_s=snap.stamp_s,
+            person_m=person,
+            takeoff_check=checks.get(v.vehicle_id),
+        )
+        for v in snap.vehicles
+    )
     return SceneView(
         time_s=snap.stamp_s,
-        vehicles=tuple(
-            vehicle_view(
-                v,
-                link_stale_s=link_stale_s,
-                now_s=snap.stamp_s,
-                person_m=person,
-                takeoff_check=checks.get(v.vehicle_id),
-            )
-            for v in snap.vehicles
-        ),
-        obstacles=snap.obstacles,
+        vehicles=vehicles,
+        obstacles=tuple(ObstacleView.of(o) for o in snap.obstacles),
         formation=snap.formation,
         formation_enabled=snap.formation_enabled,
         arena_min_m=np.array(limits.arena_min_m),
@@ -693,10 +744,11 @@ def scene_view(
         h_des_range_m=Range(*h_range),
         obstacle_radius_range_m=Range(0.1, limits.max_obstacle_radius_m),
         person_truth_m=truth,
-        person_estimate=best[2] if best else None,
+        person_estimate=PersonEstimateView.of(best[2]) if best else None,
         estimate_source_id=best[1] if best else None,
         tracking_error_m=error,
         camera=camera or CameraView(),
+        counters=counters or Counters(),
         alerts=alerts,
         pace=pace,
         utc_s=utc_s,

@@ -255,7 +255,8 @@ class _QuietServer(uvicorn.Server):
 
 @dataclass(frozen=True)
 class Urls:
-    """Where the operator finds the ground station: the landing page/API and the viser page."""
+    """Where the operator finds the ground station: the landing page/API and the 3-D page (served by the same
+    front at /operator/; viser itself listens on 127.0.0.1 only)."""
 
     api: str
     operator: str
@@ -279,6 +280,9 @@ async def serve_station(
     stop: asyncio.Event | None = None,
     on_ready: Callable[[Urls, object], None] | None = None,
     handle_signals: bool = True,
+    gate=None,
+    ssl_certfile: str | None = None,
+    ssl_keyfile: str | None = None,
 ) -> PaceStats:
     """Run the ground station (viser page, FastAPI app, paced control ticks) until `stop` is set or
     SIGINT/SIGTERM arrives; then land every MAV and close the back-ends. Returns how the run kept up with
@@ -286,10 +290,21 @@ async def serve_station(
 
     `station` is a `server.station.ground_station.GroundStation` over any list of autopilots (the embedded
     simulation or PX4 vehicles). on_ready(urls, ui) is called once when both servers listen (ui: the
-    `webui.app.OperatorUi`, for callers that inspect the scene).
+    `webui.app.OperatorUi`, for callers that inspect the scene). gate: sign-in and origin rules
+    (`server.station.api.gate.Gate`; default: open mode, allowed on loopback only); ssl_certfile /
+    ssl_keyfile: serve HTTPS and WSS (PEM files).
     """
-    from server.station.api import create_app  # FastAPI/viser load only when serving
+    from server.station.api.app import create_app  # FastAPI/viser load only when serving
+    from server.station.api.gate import LOOPBACK_NAMES, Gate
+    from server.station.api.operator_page import TicketAccess
     from webui.app import OperatorUi
+
+    gate = gate or Gate(None, secure=ssl_certfile is not None)
+    if gate.open and host not in LOOPBACK_NAMES:
+        raise ValueError(
+            f"listening on {host} needs sign-in: give a users file (--users FILE, or SKYRING_USERS_FILE / "
+            "SKYRING_USERS); without one the station listens on 127.0.0.1 only"
+        )
 
     stop = stop or asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -302,10 +317,21 @@ async def serve_station(
     server = None
     serve_task = None
     try:
-        ui = OperatorUi(actions=station, initial=station.scene_view(), host=host, port=viser_port)
+        access = TicketAccess(gate)
+        ui = OperatorUi(
+            actions=station, initial=station.scene_view(), host="127.0.0.1", port=viser_port, access=access
+        )
         sock, api_fell_back = bind_port(host, port)
-        app = create_app(station, viser_port=ui.port)
-        config = uvicorn.Config(app, log_level="warning", lifespan="off", ws="websockets-sansio")
+        app = create_app(station, viser_port=ui.port, gate=gate, access=access)
+        config = uvicorn.Config(
+            app,
+            log_level="warning",
+            lifespan="off",
+            ws="websockets-sansio",
+            ws_max_size=1 << 20,
+            ssl_certfile=ssl_certfile,
+            ssl_keyfile=ssl_keyfile,
+        )
         server = _QuietServer(config)
         serve_task = asyncio.create_task(server.serve(sockets=[sock]))
         while not server.started:
@@ -313,9 +339,10 @@ async def serve_station(
                 serve_task.result()
             await asyncio.sleep(0.02)
         api_port = sock.getsockname()[1]
+        scheme = "https" if ssl_certfile else "http"
         urls = Urls(
-            api=f"http://{url_host(host)}:{api_port}/",
-            operator=f"http://{url_host(host)}:{ui.port}/",
+            api=f"{scheme}://{url_host(host)}:{api_port}/",
+            operator=f"{scheme}://{url_host(host)}:{api_port}/operator/",
             api_fell_back=api_fell_back,
             viser_fell_back=viser_port not in (0, ui.port),
         )
@@ -335,8 +362,9 @@ async def serve_station(
         stop_task.cancel()
         if control.error is not None:
             raise control.error
-        if serve_task.done() and not serve_task.cancelled() and (error := serve_task.exception()) is not None:
-            raise error
+        failed = serve_task.exception() if serve_task.done() and not serve_task.cancelled() else None
+        if failed is not None:
+            raise failed
         return runner.stats
     finally:
         for sig in installed:

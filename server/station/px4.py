@@ -157,13 +157,14 @@ async def serve_px4(
     on_station: Callable[[GroundStation, Px4Fleet], None] | None = None,
     handle_signals: bool = True,
     flight_log: FlightLog | None = None,
+    **serve_options,
 ) -> PaceStats:
     """Connect to every vehicle, serve the ground station until stopped, then land them and disconnect.
 
     on_station(station, fleet) is called once both exist (tests and tools use it). The landing asked for at
     shutdown is given time to reach PX4 before MAVSDK closes; from then on PX4's own failsafes
     (COM_OBL_RC_ACT, NAV_DLL_ACT) cover any vehicle still in the air. flight_log (closed by its owner)
-    records the run from the moment the station exists.
+    records the run from the moment the station exists. serve_options go to `serve_station` (gate, TLS).
     """
     fleet = await Px4Fleet.open(urls, origin=origin, config=config or Px4Config())
     try:
@@ -183,6 +184,7 @@ async def serve_px4(
             stop=stop,
             on_ready=on_ready,
             handle_signals=handle_signals,
+            **serve_options,
         )
     finally:
         settled = await fleet.settle(timeout_s=5.0)

@@ -70,3 +70,11 @@ def test_the_station_supervises_as_many_agents_as_there_are_and_they_reach_it(co
 def test_every_command_line_is_one_the_cli_accepts(compose, service):
     context = parse(compose["services"][service]["command"])
     assert context.params  # parsed into the command's parameters
+
+
+@pytest.mark.parametrize("file", ["compose.yaml", "compose.agents.yaml"])
+def test_the_station_publishes_only_its_front_and_takes_its_users_from_the_environment(file):
+    station = yaml.safe_load((DOCKER / file).read_text())["services"]["groundstation"]
+    assert option(station["command"], "--host") == "0.0.0.0"  # beyond loopback: sign-in is required
+    assert "SKYRING_USERS" in station["environment"]  # passed through from the shell running compose
+    assert [p.split(":")[-1] for p in station["ports"]] == ["8000"]  # viser's own port stays inside

@@ -17,6 +17,8 @@ if TYPE_CHECKING:
     from live_harness import Live, OpenPage
     from playwright.sync_api import Browser
 
+    from server.station.api.gate import Gate
+
 EXPECT_TIMEOUT_MS = 20_000  # a software-rendered page on a busy 2-core machine can take seconds per step
 
 
@@ -32,13 +34,13 @@ def browser() -> Iterator[Browser]:
         b.close()
 
 
-def _flying(*, seed: int) -> Iterator[Live]:
+def _flying(*, seed: int, gate: Gate | None = None) -> Iterator[Live]:
     """Start a live ground station, wait until every MAV flies in formation, hand it over, stop it."""
     from live_harness import start_live
 
     from vehicles.mission import Phase
 
-    live, thread = start_live(seed=seed)
+    live, thread = start_live(seed=seed, gate=gate)
     try:
         live.wait_for(lambda: live.phases() == {Phase.FORMATION}, sim_s=40.0, what="all MAVs in formation")
         yield live
@@ -63,3 +65,12 @@ def operator_page(live: Live, browser: Browser) -> Iterator[OpenPage]:
     opened = open_operator(browser, live.urls.operator, viewport=(1100, 700), ui=live.ui)
     yield opened
     close_page(opened)
+
+
+@pytest.fixture(scope="module")
+def secured_live() -> Iterator[Live]:
+    """A live ground station that requires sign-in (`SIGNED_IN_USERS`: an operator and an observer), flying
+    in formation, shared by a module."""
+    from live_harness import signed_in_gate
+
+    yield from _flying(seed=7, gate=signed_in_gate())

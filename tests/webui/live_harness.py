@@ -10,18 +10,24 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from playwright.sync_api import Browser, FrameLocator, Locator, Page
 from viser import transforms as tf
 
+from server.station.api.gate import Gate
+from server.station.api.users import Users, user_line
 from server.station.ground_station import GroundStation
 from server.station.live import Urls, serve_station
 from vehicles.mission import Phase
 from vehicles.sim.scenario import Scenario, SimSetup, build_sim
+from webui.access import Role
+from webui.app import OperatorUi
 
 RATE_HZ = 20.0  # control rate of the live station in these tests (20 Hz; the MPC's own step is 0.1 s)
 SPEED = 4.0  # simulated seconds per wall second
+PAGE_LOAD_TIMEOUT_MS = 60_000  # the viser page on a software renderer, on a 2-core machine shared with others
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 CHROMIUM_ARGS = [
     "--headless",
@@ -39,13 +45,28 @@ CHROMIUM_ARGS = [
 ]
 
 
+OPERATOR = ("alice", "alice-secret-1")  # name, secret
+OBSERVER = ("bob", "bob-secret-22")
+
+
+def signed_in_gate() -> Gate:
+    """A gate that requires sign-in, with OPERATOR (role operator) and OBSERVER (role observer)."""
+    text = "\n".join(
+        [
+            user_line(OPERATOR[0], Role.OPERATOR, OPERATOR[1]),
+            user_line(OBSERVER[0], Role.OBSERVER, OBSERVER[1]),
+        ]
+    )
+    return Gate(Users.parse(text, source="test users"))
+
+
 @dataclass
 class Live:
     """A running ground station: its station, URLs and viser UI, and the thread that serves them."""
 
     station: GroundStation
     urls: Urls
-    ui: object
+    ui: OperatorUi
     stop: Callable[[], None]
     setup: SimSetup | None = None
     speed: float = SPEED
@@ -75,12 +96,19 @@ class Live:
 
 
 def start_live(
-    *, vehicles: int = 3, seed: int = 5, speed: float = SPEED, rate_hz: float = RATE_HZ, trees: str = "paper"
+    *,
+    vehicles: int = 3,
+    seed: int = 5,
+    speed: float = SPEED,
+    rate_hz: float = RATE_HZ,
+    trees: str = "paper",
+    gate: Gate | None = None,
 ) -> tuple[Live, threading.Thread]:
+    """Serve a simulated team in a background thread (gate: sign-in rules; None: open, loopback only)."""
     setup = build_sim(Scenario(vehicles=vehicles, seed=seed, trees=trees), clock=time.perf_counter)
     station = GroundStation(mission=setup.mission, control_period_s=1.0 / rate_hz)
     ready = threading.Event()
-    box: dict[str, object] = {}
+    box: dict[str, Any] = {}
     loop = asyncio.new_event_loop()
     stop_event = asyncio.Event()
 
@@ -101,6 +129,7 @@ def start_live(
                     stop=stop_event,
                     on_ready=on_ready,
                     handle_signals=False,
+                    gate=gate,
                 )
             )
         except BaseException as exc:  # noqa: BLE001 - reported to the test thread below
@@ -156,6 +185,24 @@ def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
 SOFTWARE_GL_DPR = 0.5  # see open_operator
 
 
+def wait_for_operator_view(opened: OpenPage, *, ui=None) -> OpenPage:
+    """Wait for the embedded operator page's canvas and controls; with the station's `ui`, also find the
+    page's viser client (the one that connected last)."""
+    frame = opened.page.frame_locator("#operator-view")
+    frame.locator("canvas").first.wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
+    frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
+    settle(opened.page)
+    if ui is not None:
+        opened.client = newest_client(ui)
+    return opened
+
+
+def new_page(browser: Browser, viewport: tuple[int, int] = (1100, 700)) -> OpenPage:
+    """A page in a new browser context (its own cookies), recording console errors, page errors and every
+    request URL."""
+    return _recording(browser, viewport)
+
+
 def open_page(browser: Browser, url: str, *, ui=None, viewport: tuple[int, int] = (1100, 700)) -> OpenPage:
     """Open the landing page `url` in a new context, recording console errors, page errors and every request
     URL; wait for the embedded operator page's canvas and controls. With the station's `ui`, also find the
@@ -163,13 +210,20 @@ def open_page(browser: Browser, url: str, *, ui=None, viewport: tuple[int, int] 
     page is served as it is); tests that only drive the controls use `open_operator`."""
     opened = _recording(browser, viewport)
     opened.page.goto(url)
-    frame = opened.page.frame_locator("#operator-view")
-    frame.locator("canvas").first.wait_for(state="visible", timeout=30_000)
-    frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=30_000)
-    settle(opened.page)
-    if ui is not None:
-        opened.client = newest_client(ui)
-    return opened
+    return wait_for_operator_view(opened, ui=ui)
+
+
+def sign_in(browser: Browser, url: str, user: tuple[str, str], *, ui=None) -> OpenPage:
+    """Open the landing page `url` of a station that requires sign-in, as a browser would: it sends the page
+    to the sign-in form; type `user` (name, secret) into it, and wait for the operator view."""
+    opened = new_page(browser)
+    opened.page.goto(url)
+    opened.page.wait_for_url("**/login?next=/")
+    opened.page.fill("#name", user[0])
+    opened.page.fill("#secret", user[1])
+    opened.page.click("#sign-in")
+    opened.page.wait_for_url(url)
+    return wait_for_operator_view(opened, ui=ui)
 
 
 def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=None) -> OpenPage:

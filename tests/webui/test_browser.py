@@ -146,7 +146,7 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     )
     new = [o for o in httpx.get(f"{live.urls.api}api/obstacles").json() if o["obstacle_id"] not in before]
     assert len(new) == 1 and new[0]["kind"] == "virtual"
-    assert np.hypot(new[0]["x_m"] - point[0], new[0]["y_m"] - point[1]) < 1.0
+    assert np.hypot(*(np.array(new[0]["center_m"]) - point[:2])) < 1.0
     live.wait_for(
         lambda: live.ui.server.scene.get_handle_by_name(f"/obstacle/{new[0]['obstacle_id']}") is not None,
         sim_s=5.0,

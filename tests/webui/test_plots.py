@@ -10,7 +10,7 @@ import pytest
 from controller.messages import PersonEstimate
 from controller.params import FormationParams
 from webui.plots import PlotHistory, with_gaps
-from webui.view import Range, SceneView, VehicleView
+from webui.view import PersonEstimateView, Range, SceneView, VehicleView
 
 
 def view(t: float, *, estimate: bool = True, stale: int | None = None) -> SceneView:
@@ -44,7 +44,7 @@ def view(t: float, *, estimate: bool = True, stale: int | None = None) -> SceneV
         arena_max_m=np.array([20.0, 20.0, 10.0]),
         d_des_range_m=Range(3.0, 18.5),
         h_des_range_m=Range(2.1, 9.1),
-        person_estimate=person if estimate else None,
+        person_estimate=PersonEstimateView.of(person) if estimate else None,
         tracking_error_m=0.4 if estimate else None,
     )
 

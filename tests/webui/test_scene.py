@@ -23,7 +23,7 @@ from webui.scene import (
     ellipsoid_label,
     vehicle_label,
 )
-from webui.view import GeodeticOrigin, Range, SceneView, VehicleView
+from webui.view import GeodeticOrigin, PersonEstimateView, Range, SceneView, VehicleView
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 
@@ -65,7 +65,7 @@ def view(*, obstacles=(), variances=(0.25, 0.04, 0.01), origin=None) -> SceneVie
         d_des_range_m=Range(1.8, 18.5),
         h_des_range_m=Range(2.1, 9.1),
         person_truth_m=np.array([0.0, 0.0, 0.9]),
-        person_estimate=estimate,
+        person_estimate=PersonEstimateView.of(estimate),
         estimate_source_id=1,
         tracking_error_m=0.5,
         origin=origin,

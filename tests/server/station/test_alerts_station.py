@@ -14,8 +14,9 @@ import uvicorn
 import websockets
 
 from server.flightlog.log import FlightLog
+from server.flightlog.reader import read_flight_log
 from server.flightlog.records import LogHeader
-from server.station.api import create_app
+from server.station.api.app import create_app
 from server.station.ground_station import GroundStation
 from vehicles.mission import Phase
 from vehicles.sim.scenario import Scenario, SimSetup, build_sim
@@ -204,14 +205,16 @@ def test_an_acknowledgement_is_recorded_in_the_flight_log_as_a_command(flying, t
         sample_rate_hz=5.0,
         started_utc="2025-01-01T00:00:00Z",
     )
-    log = FlightLog.create(tmp_path / "flight.jsonl", header=header)
+    log = FlightLog.create(tmp_path / "flight.mcap", header=header)
     flying.station.attach_log(log)
     flying.setup.autopilots[0].set_battery(0.20)
     flying.run(0.1)
     alert_id = flying.alerts("battery")[0].alert_id
     flying.station.acknowledge_alert(alert_id)
     log.close()
-    lines = [json.loads(line) for line in (tmp_path / "flight.jsonl").read_text().splitlines()]
-    commands = [r for r in lines if r.get("kind") == "command"]
-    assert commands[-1]["name"] == "acknowledge_alert" and commands[-1]["arguments"] == {"alert_id": alert_id}
-    assert commands[-1]["accepted"]
+    (audit,) = read_flight_log(tmp_path / "flight.mcap").audit
+    assert (audit.command, audit.arguments, audit.accepted) == (
+        "acknowledge_alert",
+        {"alert_id": alert_id},
+        True,
+    )

@@ -17,7 +17,7 @@ import pytest
 import uvicorn
 import websockets
 
-from server.station.api import create_app
+from server.station.api.app import create_app
 from server.station.ground_station import GroundStation
 from vehicles.mission import Phase
 from vehicles.sim.scenario import Scenario, build_sim
@@ -71,7 +71,8 @@ def client_for(station: GroundStation) -> httpx.AsyncClient:
 
 
 def without_counters(state: dict) -> dict:
-    return {k: v for k, v in state.items() if k != "counters"}
+    """The state but for the counters and the view's wall time (utc_s moves on by itself)."""
+    return {k: v for k, v in state.items() if k not in ("counters", "utc_s")}
 
 
 async def assert_refused(
@@ -121,8 +122,8 @@ async def test_state_lists_vehicles_trees_person_and_formation(station):
     assert [v["vehicle_id"] for v in state["vehicles"]] == [1, 2, 3]
     assert all(v["phase"] == "takeoff" for v in state["vehicles"])
     assert len([o for o in state["obstacles"] if o["kind"] == "tree"]) == 13
-    assert state["person"]["truth_m"] == pytest.approx([0.0, 0.0, 0.9], abs=1e-6)
-    assert state["formation"]["d_des_m"] == 8.0 and state["formation"]["enabled"] is True
+    assert state["person_truth_m"] == pytest.approx([0.0, 0.0, 0.9], abs=1e-6)
+    assert state["formation"]["d_des_m"] == 8.0 and state["formation_enabled"] is True
     assert state["arena_min_m"] == [-20.0, -20.0, 3.0]
     assert state["time_s"] == pytest.approx(1.0 / RATE_HZ)
 
@@ -135,9 +136,10 @@ async def test_state_of_a_flying_team_has_plans_estimate_and_solver_times(flying
         assert len(v["plan_positions_m"]) == 17
         # the solver's own time: 0 when the exact MPC's closed form solved the tick (no solver ran)
         assert 0.0 <= v["solver_time_s"] < 0.05
-    estimate = state["person"]["estimate"]
-    assert estimate["position_cov_trace_m2"] == pytest.approx(np.trace(estimate["position_cov_m2"]))
-    assert state["person"]["tracking_error_m"] < 1.5
+    estimate = state["person_estimate"]
+    assert np.array(estimate["cov"]).shape == (6, 6)
+    assert estimate["position_m"] == pytest.approx(flying.scene_view().person_estimate.position_m)
+    assert state["tracking_error_m"] < 1.5
 
 
 async def test_get_formation_gives_values_and_allowed_ranges(station):
@@ -146,23 +148,24 @@ async def test_get_formation_gives_values_and_allowed_ranges(station):
         "d_des_m": 8.0,
         "h_des_m": 8.0,
         "enabled": True,
-        "d_des_range_m": [1.8, 18.5],
-        "h_des_range_m": [2.1, 9.1],
+        "d_des_range_m": {"low": 1.8, "high": 18.5},
+        "h_des_range_m": {"low": 2.1, "high": 9.1},
     }
 
 
 async def test_get_obstacles_lists_the_paper_trees(station):
     obstacles = (await client_for(station).get("/api/obstacles")).json()
     assert len(obstacles) == 13
-    assert {"kind": "tree", "x_m": -14.0, "y_m": -7.0} == {k: obstacles[0][k] for k in ("kind", "x_m", "y_m")}
+    assert obstacles[0]["kind"] == "tree" and obstacles[0]["center_m"] == [-14.0, -7.0]
 
 
-async def test_landing_page_embeds_the_operator_view():
+async def test_landing_page_embeds_the_operator_view_from_the_same_origin():
     s = make_station()
     page = await client_for(s).get("/", headers={"host": "127.0.0.1:8000"})
     assert page.status_code == 200
-    assert f'<iframe id="operator-view" src="http://127.0.0.1:{VISER_PORT}/"' in page.text
+    assert '<iframe id="operator-view" src="/operator/"' in page.text
     assert 'href="/docs"' in page.text
+    assert "frame-ancestors 'self'" in page.headers["content-security-policy"]
 
 
 async def test_docs_page_loads_swagger_from_this_server_only():
@@ -235,9 +238,36 @@ async def test_malformed_formation_body_is_refused_with_the_field_named(station)
     client = client_for(station)
     response = await client.put("/api/formation", json={"d_des_m": "far"})
     assert response.status_code == 422
-    detail = response.json()["detail"]
-    assert "body.d_des_m" in detail and "body.h_des_m: Field required" in detail
+    body = response.json()
+    assert "body.d_des_m" in body["detail"] and "body.h_des_m: Field required" in body["detail"]
+    assert {tuple(e["loc"]) for e in body["errors"]} == {("body", "d_des_m"), ("body", "h_des_m")}
     assert station.mission.formation.d_des_m == 8.0
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        {"d_des_m": "9", "h_des_m": 8.0},
+        {"d_des_m": 9.0, "h_des_m": True},
+        {"d_des_m": 9.0, "h_des_m": 8.0, "speed": 3},
+    ],
+)
+async def test_strings_booleans_and_unknown_fields_are_not_coerced_but_refused(station, body):
+    response = await client_for(station).put("/api/formation", json=body)
+    assert response.status_code == 422, response.text
+    assert response.json()["errors"]
+    assert station.mission.formation.d_des_m == 8.0
+
+
+async def test_the_422_body_is_the_one_openapi_advertises(station):
+    client = client_for(station)
+    spec = (await client.get("/openapi.json")).json()
+    ref = spec["paths"]["/api/formation"]["put"]["responses"]["422"]["content"]["application/json"]["schema"]
+    schema = spec["components"]["schemas"][ref["$ref"].rsplit("/", 1)[1]]
+    for body in ({"d_des_m": "far"}, {"d_des_m": 99.0, "h_des_m": 8.0}):  # malformed, and refused
+        got = (await client.put("/api/formation", json=body)).json()
+        assert set(got) <= set(schema["properties"]) and set(schema["required"]) <= set(got)
+        assert isinstance(got["detail"], str) and isinstance(got["errors"], list)
 
 
 async def test_stop_formation_makes_every_mav_hold_and_start_resumes(flying):
@@ -260,8 +290,7 @@ async def test_post_obstacle_adds_a_virtual_obstacle_everyone_sees(station):
     assert response.json() == {
         "obstacle_id": "v1",
         "kind": "virtual",
-        "x_m": 15.0,
-        "y_m": -15.0,
+        "center_m": [15.0, -15.0],
         "radius_m": 1.2,
         "height_m": 12.0,
     }
@@ -340,6 +369,7 @@ async def test_land_takes_one_mav_out_and_its_teammates_respace_to_180_degrees(f
     client = client_for(flying)
     response = await client.post("/api/vehicles/2/land")
     assert response.status_code == 200 and response.json()["phase"] == "landing"
+    assert response.headers["x-command-id"]
     run_until(flying, lambda s: s.vehicles[1].phase == Phase.LANDED, limit_s=30.0)
     assert not flying.snapshot().vehicles[1].autopilot.in_air
 
@@ -405,7 +435,7 @@ async def test_release_is_refused_when_d_des_is_too_small_for_the_bigger_team():
 # ---- stream ------------------------------------------------------------------------------------------------
 
 
-async def test_websocket_streams_the_state_at_least_10_times_a_second(flying):
+async def test_websocket_streams_the_state_at_least_10_times_a_second_and_takes_commands(flying):
     app = create_app(flying, viser_port=VISER_PORT)
     config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning", lifespan="off")
     server = uvicorn.Server(config)
@@ -420,9 +450,24 @@ async def test_websocket_streams_the_state_at_least_10_times_a_second(flying):
             for _ in range(10):
                 await ws.recv()
             elapsed = time.monotonic() - start
+            await ws.send(
+                json.dumps({"id": "c1", "command": "set_formation", "d_des_m": 9.0, "h_des_m": 8.0})
+            )
+            await ws.send(
+                json.dumps({"id": "c2", "command": "set_formation", "d_des_m": 99.0, "h_des_m": 8.0})
+            )
+            replies = {}
+            while len(replies) < 2:
+                message = json.loads(await ws.recv())
+                if "reply_to" in message:
+                    replies[message["reply_to"]] = message
     finally:
         server.should_exit = True
         await task
     assert [v["vehicle_id"] for v in first["vehicles"]] == [1, 2, 3]
     assert first["time_s"] == pytest.approx(flying.time_s)
     assert elapsed <= 1.0  # 10 messages at the 20 Hz default take 0.5 s
+    assert replies["c1"]["accepted"] and flying.mission.formation.d_des_m == 9.0
+    assert not replies["c2"]["accepted"] and "choose a value between" in replies["c2"]["detail"]
+    audit = [r for r in flying.recent_audit if r.surface == "ws"]
+    assert [(r.command_id, r.accepted) for r in audit] == [("c1", True), ("c2", False)]

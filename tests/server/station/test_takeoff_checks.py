@@ -4,12 +4,11 @@ and is logged (server/station/ground_station.py, server/station/commands.py)."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 from test_api import assert_refused, client_for, run_until
 
 from server.flightlog.log import FlightLog
+from server.flightlog.reader import read_flight_log
 from server.flightlog.records import LogHeader
 from server.station.ground_station import GroundStation
 from vehicles.mission import Phase
@@ -73,7 +72,7 @@ async def test_the_override_starts_the_formation_and_the_flight_log_keeps_it(tmp
         sample_rate_hz=5.0,
         started_utc="2026-01-01T00:00:00+00:00",
     )
-    flight_log = FlightLog.create(tmp_path / "flight.jsonl", header=header)
+    flight_log = FlightLog.create(tmp_path / "flight.mcap", header=header)
     station = grounded_station(flight_log)
     client = client_for(station)
     assert (await client.post("/api/formation/start")).status_code == 422
@@ -82,12 +81,11 @@ async def test_the_override_starts_the_formation_and_the_flight_log_keeps_it(tmp
     run_until(station, lambda snap: all(v.phase != Phase.IDLE for v in snap.vehicles), limit_s=2.0)
     flight_log.close()
     commands = [
-        record
-        for record in map(json.loads, (tmp_path / "flight.jsonl").read_text().splitlines())
-        if record["kind"] == "command" and record["name"] == "set_formation_enabled"
+        a for a in read_flight_log(tmp_path / "flight.mcap").audit if a.command == "set_formation_enabled"
     ]
-    assert [(c["accepted"], c["arguments"]["override"]) for c in commands] == [(False, False), (True, True)]
-    assert "keep-out" in commands[1]["result"]
+    assert [(c.accepted, c.arguments["override"]) for c in commands] == [(False, False), (True, True)]
+    assert "keep-out" in commands[0].message
+    assert commands[1].result is not None and "keep-out" in commands[1].result
 
 
 async def test_release_of_a_landed_mav_inside_the_keep_out_is_refused_until_overridden():
@@ -104,3 +102,49 @@ async def test_release_of_a_landed_mav_inside_the_keep_out_is_refused_until_over
     response = await client.post("/api/vehicles/1/release", params={"override": "true"})
     assert response.status_code == 200, response.text
     assert response.json()["phase"] == "idle"
+
+
+PX4_FIELDS = ("autopilot_mode", "failsafe", "failsafe_reason", "can_arm", "arming_refusal", "takeoff_check")
+
+
+async def test_the_autopilots_own_words_and_the_takeoff_check_are_in_the_api_its_schema_and_the_log(tmp_path):
+    header = LogHeader(
+        command="serve",
+        vehicles=3,
+        seed=3,
+        method="active",
+        trees="none",
+        person="still",
+        rate_hz=RATE_HZ,
+        speed=1.0,
+        sample_rate_hz=5.0,
+        started_utc="2026-01-01T00:00:00+00:00",
+    )
+    flight_log = FlightLog.create(tmp_path / "flight.mcap", header=header)
+    station = grounded_station(flight_log)
+    for _ in range(round(RATE_HZ)):  # a second: samples after the new d_des
+        station.tick()
+    client = client_for(station)
+    spec = (await client.get("/openapi.json")).json()
+    assert set(PX4_FIELDS) <= set(spec["components"]["schemas"]["VehicleView"]["properties"])
+    api = (await client.get("/api/state")).json()["vehicles"]
+    flight_log.close()
+    logged = read_flight_log(tmp_path / "flight.mcap").samples[-1].vehicles
+    view = station.scene_view().vehicles
+    for in_api, in_log, now in zip(api, logged, view, strict=True):
+        assert in_api["autopilot_mode"] == in_log.autopilot_mode == now.autopilot_mode != ""
+        assert in_api["failsafe"] is in_log.failsafe is now.failsafe is False
+        assert in_api["takeoff_check"] == in_log.takeoff_check == now.takeoff_check
+    assert any(v.takeoff_check is not None and "keep-out" in v.takeoff_check for v in logged)
+
+
+async def test_openapi_offers_the_override_on_start_and_release_and_says_when_they_are_refused():
+    spec = (await client_for(grounded_station()).get("/openapi.json")).json()
+    for path in ("/api/formation/start", "/api/vehicles/{vehicle_id}/release"):
+        operation = spec["paths"][path]["post"]
+        override = next(p for p in operation["parameters"] if p["name"] == "override")
+        assert override["in"] == "query" and override["schema"]["type"] == "boolean"
+        assert "keep-out" in operation["responses"]["422"]["description"]
+        assert operation["responses"]["422"]["content"]["application/json"]["schema"] == {
+            "$ref": "#/components/schemas/Problem"
+        }

@@ -10,7 +10,6 @@ tests/px4_team.py). The times each scenario measured are printed (`-rP` shows th
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -32,6 +31,7 @@ from px4_team import (
     wait_for,
 )
 
+from server.flightlog.reader import read_flight_log
 from server.lab.metrics import spacing_error_deg
 
 pytestmark = [pytest.mark.slow, pytest.mark.e2e]
@@ -81,7 +81,7 @@ def stations(tmp_path):
     started: list[Station] = []
 
     def start(team: Team) -> Station:
-        station = Station(team.urls, log_path=tmp_path / f"flight-{len(started) + 1}.jsonl")
+        station = Station(team.urls, log_path=tmp_path / f"flight-{len(started) + 1}.mcap")
         started.append(station)
         return station
 
@@ -197,7 +197,7 @@ def test_a_second_station_adopts_vehicles_still_flying_after_the_first_was_kille
     second = stations(team)
     times = {"second_station_s": second.wait_ready(SECOND_STATION_BOUND_S)}
     state = second.state()
-    assert not state["formation"]["enabled"]  # found flying: nothing is commanded until the operator acts
+    assert not state["formation_enabled"]  # found flying: nothing is commanded until the operator acts
     vehicles = state["vehicles"]
     assert not any(v["in_formation"] for v in vehicles)
     flying = [v for v in vehicles if v["in_air"]]
@@ -315,7 +315,7 @@ def test_a_vehicle_inside_the_person_keep_out_is_refused_by_name_until_overridde
     station = stations(team)
     station.wait_ready(60.0)
     state = station.state()
-    assert not state["formation"]["enabled"]  # nothing took off on its own
+    assert not state["formation_enabled"]  # nothing took off on its own
     assert "keep-out" in state["vehicles"][2]["takeoff_check"]
     response = station.post("/api/formation/start")
     assert response.status_code == 422
@@ -332,10 +332,9 @@ def test_a_vehicle_inside_the_person_keep_out_is_refused_by_name_until_overridde
     )
     station.stop()
     commands = [
-        record
-        for record in map(json.loads, Path(station.log_path).read_text().splitlines())
-        if record.get("kind") == "command" and record["name"] == "set_formation_enabled"
+        a for a in read_flight_log(Path(station.log_path)).audit if a.command == "set_formation_enabled"
     ]
-    assert [(c["accepted"], c["arguments"]["override"]) for c in commands] == [(False, False), (True, True)]
-    assert "MAV 3" in commands[1]["result"] and "keep-out" in commands[1]["result"]
-    assert math.isfinite(commands[1]["time_s"])
+    assert [(c.accepted, c.arguments["override"]) for c in commands] == [(False, False), (True, True)]
+    result = commands[1].result
+    assert result is not None and "MAV 3" in result and "keep-out" in result
+    assert math.isfinite(commands[1].time_s)

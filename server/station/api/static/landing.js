@@ -1,0 +1,14 @@
+// The landing page's sign-out button, and the embedded operator page focused once loaded: keys go to it (its
+// Shift+L opens LAND ALL) unless the operator clicks elsewhere.
+"use strict";
+const view = document.getElementById("operator-view");
+if (view) {
+  view.addEventListener("load", () => view.focus());
+}
+const out = document.getElementById("sign-out");
+if (out) {
+  out.addEventListener("click", async () => {
+    await fetch("/auth/logout", { method: "POST", credentials: "same-origin" });
+    window.location.assign("/login");
+  });
+}
