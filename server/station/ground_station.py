@@ -598,15 +598,17 @@ def _positions(snap: MissionSnapshot) -> dict[int, np.ndarray]:
 
 
 def _persons(snap: MissionSnapshot) -> list[np.ndarray]:
-    """(3,) positions of the person: the truth (simulated person), then every finite fused estimate."""
-    persons = [
+    """(3,) positions of the person the take-off checks protect: the truth when the person is simulated (the
+    one whose safety counts); otherwise every finite fused estimate. Estimates are not mixed with the truth: a
+    landed MAV's tracker sees nobody and its estimate drifts, which could refuse the release of a MAV that
+    landed at formation distance."""
+    if snap.person_truth is not None:
+        return [snap.person_truth.position_m]
+    return [
         v.person.position_m
         for v in snap.vehicles
         if v.person is not None and np.all(np.isfinite(v.person.position_m))
     ]
-    if snap.person_truth is not None:
-        persons.insert(0, snap.person_truth.position_m)
-    return persons
 
 
 def takeoff_checks(snap: MissionSnapshot, *, limits: CommandLimits) -> dict[int, str]:

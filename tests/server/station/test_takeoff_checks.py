@@ -4,13 +4,16 @@ and is logged (server/station/ground_station.py, server/station/commands.py)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from test_api import assert_refused, client_for, run_until
 
+from controller.messages import PersonEstimate
 from server.flightlog.log import FlightLog
 from server.flightlog.reader import read_flight_log
 from server.flightlog.records import LogHeader
-from server.station.ground_station import GroundStation
+from server.station.ground_station import GroundStation, takeoff_checks
 from vehicles.mission import Phase
 from vehicles.sim.scenario import Scenario, build_sim
 
@@ -102,6 +105,21 @@ async def test_release_of_a_landed_mav_inside_the_keep_out_is_refused_until_over
     response = await client.post("/api/vehicles/1/release", params={"override": "true"})
     assert response.status_code == 200, response.text
     assert response.json()["phase"] == "idle"
+
+
+def test_a_landed_mavs_drifted_estimate_does_not_refuse_it_when_the_true_person_stands_clear():
+    station = grounded_station()
+    station.set_formation(d_des_m=6.0, h_des_m=8.0)  # keep-out 5.25 m: every MAV stands clear (about 8 m)
+    snap = station.snapshot()
+    here = snap.vehicles[0].autopilot
+    assert here is not None
+    drifted = PersonEstimate(
+        stamp_s=snap.stamp_s, position_m=here.position_m, velocity_mps=np.zeros(3), cov=np.eye(6)
+    )
+    vehicles = (replace(snap.vehicles[0], person=drifted), *snap.vehicles[1:])
+    assert takeoff_checks(replace(snap, vehicles=vehicles), limits=station.limits) == {}
+    no_truth = replace(snap, vehicles=vehicles, person_truth=None)  # in the field only estimates count
+    assert "stands 0.0 m from the person" in takeoff_checks(no_truth, limits=station.limits)[1]
 
 
 PX4_FIELDS = ("autopilot_mode", "failsafe", "failsafe_reason", "can_arm", "arming_refusal", "takeoff_check")
