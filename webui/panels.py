@@ -105,6 +105,7 @@ class OperatorPanel:
         self._access = access or OpenAccess()
         self._lock = threading.Lock()
         self._pending_clicks: dict[int, float] = {}  # client id -> radius of the obstacle to place
+        self._click_prompts: dict[int, viser.NotificationHandle] = {}  # client id -> its "click" prompt
         self._click_registered = False
         self._open_modals: dict[tuple[int, str], Any] = {}  # (client id, title) -> the modal shown
         self._view = initial
@@ -383,19 +384,28 @@ class OperatorPanel:
             if not self._click_registered:
                 self._server.scene.on_click()(self._on_scene_click)
                 self._click_registered = True
-        _notify(
+        # The prompt stays until the click arrives (or 60 s), then goes: never two prompts for one placement.
+        prompt = _notify(
             event.client,
             "Place obstacle",
             "Click on the ground where the obstacle should stand.",
             color="blue",
+            seconds=60.0,
         )
+        with self._lock:
+            stale = self._click_prompts.pop(event.client.client_id, None)
+            if prompt is not None:
+                self._click_prompts[event.client.client_id] = prompt
+        _remove_notification(stale)
 
     def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
         with self._lock:
             radius = self._pending_clicks.pop(event.client_id, None)
+            prompt = self._click_prompts.pop(event.client_id, None)
             if not self._pending_clicks and self._click_registered:
                 self._server.scene.remove_click_callback(self._on_scene_click)
                 self._click_registered = False
+        _remove_notification(prompt)
         if radius is None:
             return
         point = ground_point(np.asarray(event.ray_origin), np.asarray(event.ray_direction))
@@ -480,10 +490,22 @@ def _set_range(slider: Any, low: float, high: float) -> None:
 
 def _notify(
     client: viser.ClientHandle | None, title: str, body: str, *, color: NotifyColor, seconds: float = 6.0
-) -> None:
+) -> viser.NotificationHandle | None:
+    """Show a notification on one page; its handle (None when there is no page or it has gone away)."""
     if client is None:
-        return
+        return None
     try:
-        client.add_notification(title, body, auto_close_seconds=seconds, color=color)
+        return client.add_notification(title, body, auto_close_seconds=seconds, color=color)
     except Exception:  # noqa: BLE001 - the client may have gone away
         log.debug("could not notify client", exc_info=True)
+        return None
+
+
+def _remove_notification(handle: viser.NotificationHandle | None) -> None:
+    """Take a notification off its page (already closed or page gone: nothing to do)."""
+    if handle is None:
+        return
+    try:
+        handle.remove()
+    except Exception:  # noqa: BLE001 - the client may have gone away
+        log.debug("could not remove a notification", exc_info=True)

@@ -185,7 +185,8 @@ def test_plots_follow_the_covariance_trace_and_the_tracking_error(live):
     _, error = live.ui.panel.plots.sent["error"]
     history = live.ui.panel.history
     assert len(t) > 10 and np.all(np.diff(t) > 0)
-    assert live.station.time_s - t[-1] < 3.0  # the plots keep up with the mission
+    # The plots keep up with the mission: at most 2 s of wall time behind (8 simulated s at the fixture's 4x)
+    assert live.station.time_s - t[-1] < 2.0 * live.speed
     recorded = dict(zip(history.times().round(3), history.traces(), strict=True))
     assert trace[-1] == pytest.approx(recorded[round(t[-1], 3)], abs=1e-4)  # the sample the station drew
     assert 0.0 < trace[-1] < 10.0
