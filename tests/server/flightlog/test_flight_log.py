@@ -4,7 +4,6 @@ the last second off and that stays readable, and its replay (summary, audit, pla
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import math
 import os
@@ -17,6 +16,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+from log_headers import log_header
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 from typer.testing import CliRunner
@@ -26,7 +26,6 @@ from server.cli.replay import serve_replay
 from server.flightlog.channels import AUDIT_TOPIC, SCENE_TOPIC, STATE_TOPIC
 from server.flightlog.log import FlightLog
 from server.flightlog.reader import read_flight_log
-from server.flightlog.records import LogHeader
 from server.station.ground_station import GroundStation
 from vehicles.sim.scenario import Scenario, build_sim
 from webui.access import Principal, Role, Surface, acting_as
@@ -36,22 +35,6 @@ ROOT = Path(__file__).resolve().parents[3]
 _register("replay", COMMANDS["replay"])
 _register("serve", COMMANDS["serve"])
 ALICE = Principal(name="alice", role=Role.OPERATOR, surface=Surface.API, remote="192.0.2.7:5555")
-
-
-def header(**overrides: object) -> LogHeader:
-    base = LogHeader(
-        command="serve",
-        vehicles=3,
-        seed=3,
-        method="active",
-        trees="paper",
-        person="paper",
-        rate_hz=RATE_HZ,
-        speed=1.0,
-        sample_rate_hz=5.0,
-        started_utc="2025-06-01T12:00:00+00:00",
-    )
-    return dataclasses.replace(base, **overrides)
 
 
 def make_station() -> GroundStation:
@@ -68,7 +51,7 @@ def recorded_run(path: Path, *, ticks: int = 40, close: bool = True) -> FlightLo
     """A station flown for `ticks` with a log at `path`: three commands by alice (one refused), then closed
     or not."""
     station = make_station()
-    flight_log = FlightLog.create(path, header=header())
+    flight_log = FlightLog.create(path, header=log_header())
     station.attach_log(flight_log)
     fly(station, ticks // 2)
     with acting_as(ALICE.for_command("c1")):
@@ -87,7 +70,7 @@ def test_a_station_run_records_the_header_samples_at_5_hz_and_every_command_with
     path = tmp_path / "flight.mcap"
     recorded_run(path, ticks=40)  # 2.0 s of mission time at 20 Hz
     record = read_flight_log(path)
-    assert record.header == header()
+    assert record.header == log_header()
     assert [round(s.time_s, 6) for s in record.samples] == pytest.approx([0.2 * k for k in range(11)])
     assert [len(s.vehicles) for s in record.samples] == [3] * 11
     assert record.samples[-1].formation.d_des_m == 7.0

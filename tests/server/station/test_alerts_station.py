@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import uvicorn
 import websockets
+from log_headers import log_header
 
 from server.flightlog.log import FlightLog
 from server.flightlog.reader import read_flight_log
-from server.flightlog.records import LogHeader
 from server.station.api.app import create_app
 from server.station.ground_station import GroundStation
 from vehicles.mission import Phase
@@ -193,18 +193,7 @@ async def test_the_websocket_stream_carries_the_same_alerts(flying):
 
 
 def test_an_acknowledgement_is_recorded_in_the_flight_log_as_a_command(flying, tmp_path):
-    header = LogHeader(
-        command="serve",
-        vehicles=3,
-        seed=3,
-        method="active",
-        trees="paper",
-        person="paper",
-        rate_hz=RATE_HZ,
-        speed=1.0,
-        sample_rate_hz=5.0,
-        started_utc="2025-01-01T00:00:00Z",
-    )
+    header = log_header()
     log = FlightLog.create(tmp_path / "flight.mcap", header=header)
     flying.station.attach_log(log)
     flying.setup.autopilots[0].set_battery(0.20)

@@ -7,12 +7,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from log_headers import log_header
 from test_api import assert_refused, client_for, run_until
 
 from controller.messages import PersonEstimate
 from server.flightlog.log import FlightLog
 from server.flightlog.reader import read_flight_log
-from server.flightlog.records import LogHeader
 from server.station.ground_station import GroundStation, takeoff_checks
 from vehicles.mission import Phase
 from vehicles.sim.scenario import Scenario, build_sim
@@ -63,18 +63,7 @@ async def test_the_view_says_why_each_waiting_mav_may_not_take_off_where_it_stan
 
 
 async def test_the_override_starts_the_formation_and_the_flight_log_keeps_it(tmp_path):
-    header = LogHeader(
-        command="serve",
-        vehicles=3,
-        seed=3,
-        method="active",
-        trees="none",
-        person="still",
-        rate_hz=RATE_HZ,
-        speed=1.0,
-        sample_rate_hz=5.0,
-        started_utc="2026-01-01T00:00:00+00:00",
-    )
+    header = log_header(trees="none", person="still")
     flight_log = FlightLog.create(tmp_path / "flight.mcap", header=header)
     station = grounded_station(flight_log)
     client = client_for(station)
@@ -126,18 +115,7 @@ PX4_FIELDS = ("autopilot_mode", "failsafe", "failsafe_reason", "can_arm", "armin
 
 
 async def test_the_autopilots_own_words_and_the_takeoff_check_are_in_the_api_its_schema_and_the_log(tmp_path):
-    header = LogHeader(
-        command="serve",
-        vehicles=3,
-        seed=3,
-        method="active",
-        trees="none",
-        person="still",
-        rate_hz=RATE_HZ,
-        speed=1.0,
-        sample_rate_hz=5.0,
-        started_utc="2026-01-01T00:00:00+00:00",
-    )
+    header = log_header(trees="none", person="still")
     flight_log = FlightLog.create(tmp_path / "flight.mcap", header=header)
     station = grounded_station(flight_log)
     for _ in range(round(RATE_HZ)):  # a second: samples after the new d_des
