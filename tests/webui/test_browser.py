@@ -41,7 +41,10 @@ def test_page_loads_without_console_errors_or_requests_leaving_localhost(live, b
 def test_on_the_landing_page_shift_l_reaches_the_embedded_page_and_opens_land_all(live, browser):
     opened = open_page(browser, live.urls.api)
     try:
-        opened.page.keyboard.press("Shift+L")  # no click first: the landing page hands the keys to the view
+        # The embedded view has loaded (its LAND ALL button shows); no click first: the landing page hands the
+        # keys to the view. Pressing before the view has loaded raced its start-up.
+        expect(opened.operator.get_by_role("button", name="LAND ALL")).to_be_visible()
+        opened.page.keyboard.press("Shift+L")
         expect(opened.operator.get_by_text("LAND ALL?", exact=True)).to_be_visible()
         opened.operator.get_by_role("button", name="Cancel").click()
         expect(opened.operator.get_by_text("LAND ALL?", exact=True)).to_be_hidden()
