@@ -104,8 +104,8 @@ class OperatorPanel:
         self._sigma = sigma
         self._access = access or OpenAccess()
         self._lock = threading.Lock()
-        self._pending_clicks: dict[int, float] = {}  # client id -> radius of the obstacle to place
-        self._click_prompts: dict[int, viser.NotificationHandle] = {}  # client id -> its "click" prompt
+        # client id -> radius (m) of the obstacle it places and its "click" prompt (None until shown)
+        self._pending_clicks: dict[int, tuple[float, viser.NotificationHandle | None]] = {}
         self._click_registered = False
         self._open_modals: dict[tuple[int, str], Any] = {}  # (client id, title) -> the modal shown
         self._view = initial
@@ -379,11 +379,14 @@ class OperatorPanel:
     def _on_add_obstacle(self, event: viser.GuiEvent) -> None:
         if event.client is None:
             return
+        client_id = event.client.client_id
         with self._lock:
-            self._pending_clicks[event.client.client_id] = float(self._radius.value)
+            _, stale = self._pending_clicks.get(client_id, (0.0, None))
+            self._pending_clicks[client_id] = (float(self._radius.value), None)
             if not self._click_registered:
                 self._server.scene.on_click()(self._on_scene_click)
                 self._click_registered = True
+        _remove_notification(stale)
         # The prompt stays until the click arrives (or 60 s), then goes: never two prompts for one placement.
         prompt = _notify(
             event.client,
@@ -393,15 +396,15 @@ class OperatorPanel:
             seconds=60.0,
         )
         with self._lock:
-            stale = self._click_prompts.pop(event.client.client_id, None)
-            if prompt is not None:
-                self._click_prompts[event.client.client_id] = prompt
-        _remove_notification(stale)
+            waiting = client_id in self._pending_clicks
+            if waiting:
+                self._pending_clicks[client_id] = (self._pending_clicks[client_id][0], prompt)
+        if not waiting:  # the click came before the prompt was shown
+            _remove_notification(prompt)
 
     def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
         with self._lock:
-            radius = self._pending_clicks.pop(event.client_id, None)
-            prompt = self._click_prompts.pop(event.client_id, None)
+            radius, prompt = self._pending_clicks.pop(event.client_id, (None, None))
             if not self._pending_clicks and self._click_registered:
                 self._server.scene.remove_click_callback(self._on_scene_click)
                 self._click_registered = False

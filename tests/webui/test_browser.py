@@ -4,6 +4,7 @@ running faster than real time: loading, the scene, the controls, confirmations, 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from urllib.parse import urlsplit
 
 import httpx
@@ -115,21 +116,35 @@ def clear_ground_point(live, camera) -> tuple[np.ndarray, tuple[float, float]]:
     return best[1], best[2]
 
 
-def click_ground(opened, fraction: tuple[float, float]) -> None:
-    """Click the 3-D canvas at (x, y) fractions of its size, at once (no waiting for animations to settle:
-    the scene moves while a software-rendered browser takes its time)."""
-    canvas = scene_canvas(opened.operator)
-    size = canvas.bounding_box()
-    assert size is not None
-    canvas.click(position={"x": fraction[0] * size["width"], "y": fraction[1] * size["height"]}, force=True)
+PROMPT = "Click on the ground where the obstacle should stand."
 
 
 def start_placing_an_obstacle(frame) -> None:
     """Press "Add obstacle" and wait for the station's prompt: it comes after the station asked the page for
     scene clicks, so a click from now on reaches it (one sooner is not sent at all)."""
     frame.get_by_text("Add obstacle, then click the ground", exact=True).click()
-    prompt = frame.get_by_text("Click on the ground where the obstacle should stand.", exact=True)
-    expect(prompt).to_be_visible()
+    expect(frame.get_by_text(PROMPT, exact=True)).to_be_visible()
+
+
+def click_ground(opened, where: Callable[[], tuple[float, float]], attempts: int = 4) -> None:
+    """Click the 3-D canvas at `where()` (x, y fractions of its size) until the station takes the click, which
+    it shows by removing its prompt. At once, with no waiting for animations to settle (the scene moves while a
+    software-rendered browser takes its time). Clicking again is what an operator does when a click is lost:
+    under the full suite's load chromium sometimes drops one (the prompt stayed and no click reached the
+    station); a repeated click after the station took one is ignored, as nothing waits for it any more."""
+    canvas = scene_canvas(opened.operator)
+    prompt = opened.operator.get_by_text(PROMPT, exact=True)
+    for _ in range(attempts):
+        size = canvas.bounding_box()
+        assert size is not None
+        fx, fy = where()
+        canvas.click(position={"x": fx * size["width"], "y": fy * size["height"]}, force=True)
+        try:
+            expect(prompt).to_be_hidden(timeout=4000)
+            return
+        except AssertionError:
+            continue
+    raise AssertionError(f"the station took none of {attempts} clicks on the ground")
 
 
 def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_api(live, operator_page):
@@ -141,7 +156,7 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     radius.press("Enter")
     start_placing_an_obstacle(operator_page.operator)
     point, fraction = clear_ground_point(live, camera)
-    click_ground(operator_page, fraction)
+    click_ground(operator_page, lambda: fraction)
     live.wait_for(
         lambda: {o.obstacle_id for o in live.station.snapshot().obstacles} != before,
         sim_s=20.0,
@@ -173,8 +188,10 @@ def test_an_obstacle_clicked_onto_the_person_is_refused_with_a_notification(live
     live.wait_for(lambda: camera.update_timestamp > asked_s, sim_s=20.0, what="the page turns its camera")
     try:
         start_placing_an_obstacle(operator_page.operator)
-        person = np.array(live.station.snapshot().person_truth.position_m)
-        click_ground(operator_page, ground_to_canvas_fraction(camera, person * [1.0, 1.0, 0.0]))
+        click_ground(
+            operator_page,
+            lambda: ground_to_canvas_fraction(camera, np.asarray(live.station.snapshot().person_truth.position_m) * [1, 1, 0]),
+        )
         expect(operator_page.operator.get_by_text("would cover the person", exact=False)).to_be_visible()
         assert [o.obstacle_id for o in live.station.snapshot().obstacles] == before
     finally:
