@@ -127,11 +127,11 @@ def start_placing_an_obstacle(frame) -> None:
 
 
 def click_ground(opened, where: Callable[[], tuple[float, float]], attempts: int = 4) -> None:
-    """Click the 3-D canvas at `where()` (x, y fractions of its size) until the station takes the click, which
-    it shows by removing its prompt. At once, with no waiting for animations to settle (the scene moves while a
-    software-rendered browser takes its time). Clicking again is what an operator does when a click is lost:
-    under the full suite's load chromium sometimes drops one (the prompt stayed and no click reached the
-    station); a repeated click after the station took one is ignored, as nothing waits for it any more."""
+    """Click the 3-D canvas at `where()` (x, y fractions of its size) until the station takes the click,
+    which it shows by removing its prompt. At once, with no waiting for animations to settle (the scene
+    moves while a software-rendered browser takes its time). Clicking again is what an operator does when a
+    click is lost: under the full suite's load chromium sometimes drops one (the prompt stayed and no click
+    reached the station); a click after the station took one is ignored, as nothing waits for it any more."""
     canvas = scene_canvas(opened.operator)
     prompt = opened.operator.get_by_text(PROMPT, exact=True)
     for _ in range(attempts):
@@ -186,12 +186,14 @@ def test_an_obstacle_clicked_onto_the_person_is_refused_with_a_notification(live
     camera.look_at = live.station.snapshot().person_truth.position_m * [1.0, 1.0, 0.0]
     asked_s = camera.update_timestamp  # the page's own report of its camera comes later
     live.wait_for(lambda: camera.update_timestamp > asked_s, sim_s=20.0, what="the page turns its camera")
+
+    def person_on_the_canvas() -> tuple[float, float]:
+        person = np.asarray(live.station.snapshot().person_truth.position_m)
+        return ground_to_canvas_fraction(camera, person * [1.0, 1.0, 0.0])
+
     try:
         start_placing_an_obstacle(operator_page.operator)
-        click_ground(
-            operator_page,
-            lambda: ground_to_canvas_fraction(camera, np.asarray(live.station.snapshot().person_truth.position_m) * [1, 1, 0]),
-        )
+        click_ground(operator_page, person_on_the_canvas)
         expect(operator_page.operator.get_by_text("would cover the person", exact=False)).to_be_visible()
         assert [o.obstacle_id for o in live.station.snapshot().obstacles] == before
     finally:
