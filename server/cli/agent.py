@@ -12,6 +12,7 @@ PX4's offboard-loss failsafe lands it. The protocol is in docs/agents.md.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import math
 import signal
@@ -77,6 +78,12 @@ def agent(
     station_timeout: Annotated[
         float, typer.Option(help="land after this long without the station (s)")
     ] = 10.0,
+    realtime_priority: Annotated[
+        int,
+        typer.Option(
+            help="run the control loop under SCHED_FIFO at this priority (1-99; needs CAP_SYS_NICE), 0: off"
+        ),
+    ] = 0,
     method: Annotated[Method, typer.Option(help="formation method")] = Method.ACTIVE,
     origin: Annotated[
         str | None, typer.Option(help="team frame origin 'lat,lon,alt' (every agent must use the same)")
@@ -121,6 +128,10 @@ def agent(
         params = OnboardParams(rate_hz=rate, station_timeout_s=station_timeout)
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--station-timeout") from None
+    try:
+        params = dataclasses.replace(params, realtime_priority=realtime_priority)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--realtime-priority") from None
     config = net_config(
         team=team, connect=connect, listen=listen, zenoh_config=zenoh_config, multicast=multicast
     )
@@ -159,13 +170,22 @@ def agent(
         )
 
 
+def _scheduling(params) -> str:
+    """What the control loop asked of the scheduler, for the start-up line (a refusal is logged)."""
+    if params.realtime_priority == 0:
+        return "normal scheduler"
+    return f"SCHED_FIFO priority {params.realtime_priority} asked"
+
+
 def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_factory, calibration=None):
     from controller.params import ControllerParams
     from controller.warmup import warm_up
+    from vehicles.net import realtime
     from vehicles.net.onboard import OnboardAgent
     from vehicles.net.session import Bus
 
     warm_up(ControllerParams(method=method))  # the compiled kernels, before the agent's first tick
+    realtime.shorten_gil_switch_interval()
 
     bus = Bus(config, sender=vehicle_id, is_member=lambda s: 0 <= s <= team_size)
     try:
@@ -203,7 +223,11 @@ def run_sim_agent(
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     onboard.start()
-    typer.echo(f"agent {vehicle_id}: team {config.team}, simulated vehicle, {params.rate_hz:g} Hz", err=True)
+    typer.echo(
+        f"agent {vehicle_id}: team {config.team}, simulated vehicle, {params.rate_hz:g} Hz, "
+        f"{_scheduling(params)}",
+        err=True,
+    )
     try:
         while not stop.wait(0.5):
             pass
@@ -281,7 +305,10 @@ async def run_px4_agent(
         )
         camera.start()
     onboard.start()
-    typer.echo(f"agent {vehicle_id}: team {config.team}, PX4 at {url}, {params.rate_hz:g} Hz", err=True)
+    typer.echo(
+        f"agent {vehicle_id}: team {config.team}, PX4 at {url}, {params.rate_hz:g} Hz, {_scheduling(params)}",
+        err=True,
+    )
     try:
         await stop.wait()
     finally:

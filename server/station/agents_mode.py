@@ -122,6 +122,7 @@ def agent_command(
     listen: str,
     rate_hz: float,
     method: Method,
+    realtime_priority: int = 0,
 ) -> list[str]:
     """The command line of one rehearsal agent process."""
     return [
@@ -141,6 +142,8 @@ def agent_command(
         f"{rate_hz:g}",
         "--method",
         method.value,
+        "--realtime-priority",
+        str(realtime_priority),
         "--listen",
         listen,
         *[a for endpoint in connect for a in ("--connect", endpoint)],
@@ -155,13 +158,14 @@ def build_spawn_station(
     trees: str = "paper",
     person: str = "paper",
     agent_rate_hz: float = 20.0,
+    agent_realtime_priority: int = 0,
     team: str = "rehearsal",
     listen_port: int | None = None,
     stderr=None,
 ) -> AgentsStation:
     """The one-laptop rehearsal: the world and the station in this process, one agent process per MAV, all on
     Zenoh over 127.0.0.1 (multicast scouting off; every agent connects to the station's endpoint and to the
-    agents started before it)."""
+    agents started before it). agent_realtime_priority: the agents' `--realtime-priority`."""
     setup = build_sim(Scenario(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person))
     port = listen_port or free_tcp_port()
     station_endpoint = f"tcp/127.0.0.1:{port}"
@@ -199,6 +203,7 @@ def build_spawn_station(
                 listen=own,
                 rate_hz=agent_rate_hz,
                 method=method,
+                realtime_priority=agent_realtime_priority,
             )
             processes.append(subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stderr=stderr))
             endpoints = [*endpoints, own]

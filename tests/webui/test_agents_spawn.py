@@ -6,10 +6,12 @@ agents' control loops."""
 from __future__ import annotations
 
 import asyncio
+import os
 import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import httpx
 import numpy as np
@@ -19,10 +21,37 @@ from server.lab.metrics import spacing_error_deg
 from server.station.agents_mode import AgentsStation, build_spawn_station
 from server.station.live import Urls, serve_station
 from vehicles.mission import Phase
+from vehicles.net.realtime import control_thread_name, policy, raise_calling_thread
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 VEHICLES = 5
+REALTIME_PRIORITY = 10  # the agents' --realtime-priority, as on a companion computer
+
+
+def control_loop_policies(agents: AgentsStation) -> list[int | None]:
+    """Per agent process, the scheduling policy of its control thread (None until it has started). Only
+    that one: Zenoh's own watchdog threads put themselves under SCHED_FIFO wherever they may."""
+    out: list[int | None] = []
+    for vehicle_id, proc in enumerate(agents.processes, start=1):
+        found = None
+        for task in Path(f"/proc/{proc.pid}/task").iterdir():
+            try:
+                if (task / "comm").read_text().strip() == control_thread_name(vehicle_id):
+                    found = policy(int(task.name))
+            except OSError:  # the thread ended meanwhile
+                continue
+        out.append(found)
+    return out
+
+
+def fifo_allowed() -> bool:
+    """Whether this system lets a process of ours run a thread under SCHED_FIFO (root or an rtprio limit)."""
+    result: list[str | None] = []
+    probe = threading.Thread(target=lambda: result.append(raise_calling_thread(REALTIME_PRIORITY)))
+    probe.start()
+    probe.join()
+    return result == [None]
 
 
 @dataclass
@@ -51,7 +80,9 @@ class Spawned:
 
 @pytest.fixture(scope="module")
 def spawned() -> Iterator[Spawned]:
-    agents = build_spawn_station(vehicles=VEHICLES, seed=1, trees="paper", person="paper")
+    agents = build_spawn_station(
+        vehicles=VEHICLES, seed=1, trees="paper", person="paper", agent_realtime_priority=REALTIME_PRIORITY
+    )
     loop = asyncio.new_event_loop()
     stop = asyncio.Event()
     box: dict[str, object] = {}
@@ -134,13 +165,24 @@ def test_operator_page_drives_the_agents_and_shows_their_acknowledgements(spawne
         close_page(opened)
 
 
+def test_the_agents_control_loops_run_under_sched_fifo_where_the_system_allows_it(spawned):
+    """`--realtime-priority` puts each agent's control thread under SCHED_FIFO; where the system refuses it
+    (no CAP_SYS_NICE), the loops run under the normal scheduler."""
+    expected = [os.SCHED_FIFO if fifo_allowed() else os.SCHED_OTHER] * VEHICLES
+    deadline = time.monotonic() + 60.0  # the agents start their loops after their imports and warm-up
+    while None in control_loop_policies(spawned.agents) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert control_loop_policies(spawned.agents) == expected
+
+
 def test_web_load_does_not_reach_the_agents_control_loops(spawned):
     """50 WebSocket clients and ten 10 MB request bodies against the station while the agents fly: every
-    agent keeps flying and tracking, and its tick period's p99 error stays under 0.25 s (five periods at
-    20 Hz). That bound is generous on purpose: on a shared 2-core machine the load generator itself takes CPU
-    from the agents, which no process separation prevents; what it catches is the coupling this design
-    removed (in one process, 50 clients slowed the control loop to 0.58x real time and one large body stalled
-    it for 1.7 s). The figure itself, with and without load, is measured by `skyring bench agents`."""
+    agent keeps flying and tracking, and its tick period's p99 error stays under 20 ms under SCHED_FIFO (ten
+    times the 2 ms target, as the rest of the suite runs beside it), 0.25 s under the normal scheduler (five
+    periods at 20 Hz: there the load generator itself takes CPU from the agents, which no process separation
+    prevents). What it catches is the coupling this design removed (in one process, 50 clients slowed the
+    control loop to 0.58x real time and one large body stalled it for 1.7 s). The figures, with and without
+    load under both schedulers, are measured by `skyring bench agents` (docs/agents.md)."""
     import websockets
 
     api = spawned.urls.api.rstrip("/")
@@ -169,10 +211,11 @@ def test_web_load_does_not_reach_the_agents_control_loops(spawned):
     assert spawned.station.time_s - station_t0 > 0.5 * elapsed  # the station's own loop kept ticking too
     assert answered == 10  # refused (4xx) or not, each request was answered
     vehicles = spawned.station.snapshot().vehicles
+    bound_s = 0.02 if control_loop_policies(spawned.agents) == [os.SCHED_FIFO] * VEHICLES else 0.25
     for v in vehicles:
         assert v.agent is not None and not v.agent.lost
         p99 = v.agent.tick_period_p99_error_s
-        assert p99 is not None and p99 < 0.25, f"MAV {v.vehicle_id}: tick p99 error {p99}"
+        assert p99 is not None and p99 < bound_s, f"MAV {v.vehicle_id}: tick p99 error {p99} s"
         fused = v.counters.own_detections_fused - before[v.vehicle_id].own_detections_fused
         assert fused > 0  # it kept tracking through the load
         assert v.phase is Phase.FORMATION

@@ -40,7 +40,7 @@ from vehicles.autopilot import Autopilot
 from vehicles.detect.calibration import Calibration
 from vehicles.detect.converter import ConverterStats, DetectionConverter
 from vehicles.link_loss import silent_teammate_obstacle
-from vehicles.net import wire
+from vehicles.net import realtime, wire
 from vehicles.net.guard import Received
 from vehicles.net.keys import agent_key, station_key
 from vehicles.net.session import Bus
@@ -60,6 +60,8 @@ class OnboardParams:
     station_timeout_s: no station heartbeat for this long -> land (PX4's data-link loss default is 10 s);
     silent_after_s: a teammate unheard for this long leaves the roster and is avoided as silent;
     silent_keep_s: and is forgotten after this long (its failsafe has landed it by then);
+    realtime_priority: the control thread's SCHED_FIFO priority 1..99, 0 for the normal scheduler
+        (vehicles/net/realtime.py; refused without CAP_SYS_NICE, then the loop runs normally and says so);
     max_d_des_m / min_d_des_m, h_des bounds come from the controller's arena (see `check_settings`)."""
 
     rate_hz: float = 20.0
@@ -67,12 +69,14 @@ class OnboardParams:
     station_timeout_s: float = 10.0
     silent_after_s: float = 1.5
     silent_keep_s: float = 60.0
+    realtime_priority: int = 0
 
     def __post_init__(self) -> None:
         for name in ("rate_hz", "state_rate_hz", "station_timeout_s", "silent_after_s", "silent_keep_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value}")
+        realtime.check_priority(self.realtime_priority)
 
 
 def check_settings(settings: wire.SettingsBody, params: ControllerParams) -> str | None:
@@ -173,6 +177,7 @@ class OnboardAgent:
         self.loop_errors = 0
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self.realtime_refused: str | None = None  # why the control thread runs without SCHED_FIFO, if asked
         team = bus.team
         self._state_key = agent_key(team, self.vehicle_id, "state")
         self._ack_key = agent_key(team, self.vehicle_id, "ack")
@@ -202,6 +207,14 @@ class OnboardAgent:
     def run(self) -> None:
         """Tick at rate_hz on the monotonic clock until stopped; a late tick re-anchors (counted), never
         bunches; an exception in a tick is counted and logged, the loop goes on."""
+        realtime.name_calling_thread(realtime.control_thread_name(self.vehicle_id))
+        self.realtime_refused = realtime.raise_calling_thread(self.params.realtime_priority)
+        if self.realtime_refused is not None:
+            log.warning(
+                "agent %d: %s: the control loop runs under the normal scheduler",
+                self.vehicle_id,
+                self.realtime_refused,
+            )
         period = 1.0 / self.params.rate_hz
         next_tick = time.monotonic()
         while not self._stop.is_set():

@@ -28,6 +28,7 @@ def registered():
         (["agent", "--id", "1", "--sim", "--connect", "192.168.1.10:7447"], "not a Zenoh endpoint"),
         (["agent", "--id", "1", "--sim", "--rate", "0"], "from 1 to 200 Hz"),
         (["agent", "--id", "1", "--sim", "--station-timeout", "-1"], "station_timeout_s"),
+        (["agent", "--id", "1", "--sim", "--realtime-priority", "100"], "from 0 (off) to 99"),
         (["agent", "--id", "1", "--px4", "udpin://0.0.0.0:1", "--emulate-camera", "dog"], "--emulate-camera"),
         (["serve", "--agents", "cloud"], "in-process, zenoh or spawn"),
         (["serve", "--agents", "spawn", "--px4", "udpin://0.0.0.0:14540", "--no-log"], "drop --px4"),
