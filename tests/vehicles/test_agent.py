@@ -67,6 +67,24 @@ def test_teammate_detections_are_fused_and_not_rebroadcast():
     assert out.outbox == ()
 
 
+def test_a_ticks_detections_are_fused_in_capture_time_order_whatever_order_they_arrive_in():
+    """Teammates' detections arriving newest first and an own detection older than them: fused oldest first,
+    so nothing is re-filtered out of order, and the estimate is the one of an in-order arrival."""
+    arrived = (_det(4, 0.30, PERSON + [0.2, 0, 0]), _det(3, 0.25, PERSON + [0.1, 0, 0]), _det(2, 0.20))
+    own = (_det(1, 0.15, PERSON - [0.1, 0, 0]),)
+    shuffled, ordered = Agent(vehicle_id=1), Agent(vehicle_id=1)
+    shuffled.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), role=AgentRole.GROUND))
+    ordered.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), role=AgentRole.GROUND))
+    out = shuffled.tick(0.35, _inputs(0.35, received=arrived, detections=own, role=AgentRole.GROUND))
+    ordered.tick(0.35, _inputs(0.35, detections=own, role=AgentRole.GROUND))
+    want = ordered.tick(0.35, _inputs(0.35, received=arrived[::-1], role=AgentRole.GROUND))
+    assert out.tracker.out_of_order == 0 and out.tracker.accepted == 5
+    assert out.counters.own_detections_fused == 2 and out.counters.teammate_detections_fused == 3
+    assert out.person is not None and want.person is not None
+    np.testing.assert_allclose(out.person.position_m, want.person.position_m, atol=1e-12)
+    np.testing.assert_allclose(out.person.cov, want.person.cov, atol=1e-12)
+
+
 def test_echoes_of_its_own_messages_and_unknown_messages_are_rejected_and_counted():
     agent = Agent(vehicle_id=1)
     bad_plan = _plan(2, 0.0, [np.nan, 0.0, 8.9])
