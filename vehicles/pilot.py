@@ -117,7 +117,8 @@ class AgentLink:
     commands: per-vehicle command outcomes ("pending", "acked", "refused", "failed") of the latest
     commands, newest last, each as (command id, kind, outcome, message); rejected_messages: network messages
     this agent rejected (malformed, oversized, foreign team, unknown sender, other version, replayed);
-    station_lost: the agent reports it no longer hears the station.
+    station_lost: the agent reports it no longer hears the station; scheduler: what its control loop runs
+    under, as it reports it ("" before it has).
     """
 
     lost: bool
@@ -127,6 +128,7 @@ class AgentLink:
     commands: tuple[tuple[int, str, str, str], ...] = ()
     rejected_messages: int = 0
     station_lost: bool = False
+    scheduler: str = ""
 
 
 class VehiclePilot:

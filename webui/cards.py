@@ -174,6 +174,8 @@ def agent_line(vehicle: VehicleView) -> str:
     parts = [f"**{AGENT_LOST_FLAG}** ({a.age_s:.1f} s)" if a.lost else "agent ok"]
     if a.station_lost:
         parts.append("it lost the station")
+    if a.scheduler:
+        parts.append(f"control loop: {a.scheduler}")
     if a.clock_offset_s is not None:
         skew = f" **{SKEW_FLAG}**" if a.clock_skew else ""
         parts.append(f"clock {a.clock_offset_s * 1e3:+.0f} ms{skew}")

@@ -41,8 +41,9 @@ class AgentView:
     lost: nothing heard for longer than the station's limit; age_s: since its last state; clock_offset_s:
     agent clock minus station clock (None before a measurement); clock_skew: beyond the station's limit
     (50 ms); tick_period_p99_error_s: the agent's control-tick jitter; station_lost: the agent no longer hears
-    the station; rejected_messages: network messages it refused; commands: recent operator commands and
-    how the agent answered them, newest last.
+    the station; scheduler: what its control loop runs under, as it reports it ("" before it has);
+    rejected_messages: network messages it refused; commands: recent operator commands and how the agent
+    answered them, newest last.
     """
 
     lost: bool
@@ -51,6 +52,7 @@ class AgentView:
     clock_skew: bool = False
     tick_period_p99_error_s: float | None = None
     station_lost: bool = False
+    scheduler: str = ""
     rejected_messages: int = 0
     commands: tuple[CommandOutcome, ...] = ()
 

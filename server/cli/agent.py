@@ -170,13 +170,6 @@ def agent(
         )
 
 
-def _scheduling(params) -> str:
-    """What the control loop asked of the scheduler, for the start-up line (a refusal is logged)."""
-    if params.realtime_priority == 0:
-        return "normal scheduler"
-    return f"SCHED_FIFO priority {params.realtime_priority} asked"
-
-
 def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_factory, calibration=None):
     from controller.params import ControllerParams
     from controller.warmup import warm_up
@@ -208,6 +201,7 @@ def run_sim_agent(
     *, vehicle_id: int, team_size: int, config, params, method: Method, seed: int, calibration=None
 ) -> None:
     """The agent of a rehearsal vehicle (served by the world process) until SIGINT/SIGTERM."""
+    from vehicles.net import realtime
     from vehicles.net.remote_sim import RemoteAutopilot
 
     bus, autopilot, onboard = _make_agent(
@@ -225,7 +219,7 @@ def run_sim_agent(
     onboard.start()
     typer.echo(
         f"agent {vehicle_id}: team {config.team}, simulated vehicle, {params.rate_hz:g} Hz, "
-        f"{_scheduling(params)}",
+        f"control loop: {realtime.describe(params.realtime_priority)}",
         err=True,
     )
     try:
@@ -257,6 +251,7 @@ async def run_px4_agent(
     import mavsdk
 
     from server.station.px4 import URL_SCHEMES
+    from vehicles.net import realtime
     from vehicles.net.camera_emulator import EmulatedCamera
     from vehicles.px4.autopilot import Px4Autopilot, Px4Config, Px4Error
     from vehicles.px4.geodesy import parse_geodetic
@@ -306,7 +301,8 @@ async def run_px4_agent(
         camera.start()
     onboard.start()
     typer.echo(
-        f"agent {vehicle_id}: team {config.team}, PX4 at {url}, {params.rate_hz:g} Hz, {_scheduling(params)}",
+        f"agent {vehicle_id}: team {config.team}, PX4 at {url}, {params.rate_hz:g} Hz, "
+        f"control loop: {realtime.describe(params.realtime_priority)}",
         err=True,
     )
     try:

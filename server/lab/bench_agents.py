@@ -17,6 +17,7 @@ import time
 
 from server.station.agents_mode import build_spawn_station
 from server.station.live import Urls, serve_station
+from vehicles.net import realtime
 
 VEHICLES = 3
 WINDOW_S = 10.0
@@ -96,9 +97,7 @@ def run(*, repeats: int) -> None:
         f"{WINDOW_S:g} s windows, per agent"
     )
     for priority in (0, REALTIME_PRIORITY):
-        print(
-            f"  control loops: {'normal scheduler' if priority == 0 else f'SCHED_FIFO priority {priority}'}"
-        )
+        print(f"  control loops: {realtime.describe(priority)}")
         _rehearsal(priority)
     print("  target: within 2 ms of nominal at p99")
 

@@ -428,6 +428,7 @@ class AgentFleet:
             commands=commands,
             rejected_messages=sum(s.rejected.values()) if s is not None else 0,
             station_lost=s.station_lost if s is not None else False,
+            scheduler=s.scheduler if s is not None else "",
         )
         if s is None:
             return VehicleSnapshot(

@@ -685,6 +685,7 @@ def agent_view(link, *, skew_limit_s: float = 0.05) -> AgentView:
         clock_skew=offset is not None and abs(offset) > skew_limit_s,
         tick_period_p99_error_s=link.tick_period_p99_error_s,
         station_lost=link.station_lost,
+        scheduler=link.scheduler,
         rejected_messages=link.rejected_messages,
         commands=tuple(CommandOutcome(*command) for command in link.commands),
     )

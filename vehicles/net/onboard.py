@@ -177,7 +177,8 @@ class OnboardAgent:
         self.loop_errors = 0
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self.realtime_refused: str | None = None  # why the control thread runs without SCHED_FIFO, if asked
+        self.scheduler = realtime.describe(self.params.realtime_priority)
+        """What the control loop runs under (realtime.describe), a refusal included once run() has asked."""
         team = bus.team
         self._state_key = agent_key(team, self.vehicle_id, "state")
         self._ack_key = agent_key(team, self.vehicle_id, "ack")
@@ -208,12 +209,11 @@ class OnboardAgent:
         """Tick at rate_hz on the monotonic clock until stopped; a late tick re-anchors (counted), never
         bunches; an exception in a tick is counted and logged, the loop goes on."""
         realtime.name_calling_thread(realtime.control_thread_name(self.vehicle_id))
-        self.realtime_refused = realtime.raise_calling_thread(self.params.realtime_priority)
-        if self.realtime_refused is not None:
+        refused = realtime.raise_calling_thread(self.params.realtime_priority)
+        self.scheduler = realtime.describe(self.params.realtime_priority, refused)
+        if refused is not None:
             log.warning(
-                "agent %d: %s: the control loop runs under the normal scheduler",
-                self.vehicle_id,
-                self.realtime_refused,
+                "agent %d: %s: the control loop runs under the normal scheduler", self.vehicle_id, refused
             )
         period = 1.0 / self.params.rate_hz
         next_tick = time.monotonic()
@@ -406,6 +406,7 @@ class OnboardAgent:
             hb_stamp=heartbeat[0] if heartbeat is not None else None,
             hb_received=heartbeat[1] if heartbeat is not None else None,
             station_lost=self.station_lost,
+            scheduler=self.scheduler[: wire.MAX_TEXT],
             camera=_camera_counts(self.converter.stats()),
         )
 

@@ -49,6 +49,16 @@ def raise_calling_thread(priority: int) -> str | None:
     return None
 
 
+def describe(priority: int, refused: str | None = None) -> str:
+    """What a control loop runs under, in words, for start-up lines, benchmarks and the operator: the
+    priority asked (0: the normal scheduler) and, when the system refused it, why."""
+    if priority == 0:
+        return "normal scheduler"
+    if refused is not None:
+        return f"normal scheduler ({refused})"
+    return f"SCHED_FIFO priority {priority}"
+
+
 def policy(tid: int = 0) -> int:
     """The scheduling policy of thread `tid` (0: the calling thread), without the reset-on-fork flag."""
     return os.sched_getscheduler(tid) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)

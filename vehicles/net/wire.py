@@ -164,7 +164,8 @@ class StateBody(_Body, frozen=True):
     messages this agent refused, by reason; hb_stamp / hb_received: the last station heartbeat's stamp and
     when it arrived (agent UTC), for the station's clock-offset measurement; station_lost: no heartbeat for
     longer than the station timeout; camera: the camera converter's counts (received, converted, pending,
-    rejected_<reason>, latency_p50_ms and latency_max_ms from capture to conversion, -1 before the first).
+    rejected_<reason>, latency_p50_ms and latency_max_ms from capture to conversion, -1 before the first);
+    scheduler: what its control loop runs under (vehicles.net.realtime.describe), a refusal included.
     """
 
     phase: Annotated[str, msgspec.Meta(max_length=16)]
@@ -189,6 +190,7 @@ class StateBody(_Body, frozen=True):
     hb_stamp: float | None = None
     hb_received: float | None = None
     station_lost: bool = False
+    scheduler: Text = ""
 
 
 class HeartbeatBody(_Body, frozen=True):

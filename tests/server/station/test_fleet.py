@@ -127,6 +127,14 @@ def test_the_clock_offset_is_measured_and_a_skew_over_50_ms_is_flagged_on_the_ca
     assert SKEW_FLAG in vehicle_detail_markdown(_vehicle_view(vehicle), ())
 
 
+def test_what_the_agents_control_loop_runs_under_reaches_the_card(setup):
+    fleet, _ = setup
+    wait_for(lambda: link(fleet, 1)[1].scheduler != "")
+    vehicle, status = link(fleet, 1)
+    assert status.scheduler == "normal scheduler"
+    assert "control loop: normal scheduler" in vehicle_detail_markdown(_vehicle_view(vehicle), ())
+
+
 def test_landing_a_vehicle_on_the_ground_is_refused_and_release_needs_a_landed_one(setup):
     fleet, agent = setup
     with pytest.raises(MissionError, match="no vehicle"):

@@ -225,6 +225,25 @@ def test_teammates_heard_in_formation_join_the_roster_and_silent_ones_become_obs
     assert np.allclose(silent[0].center_m, [-8.0, 0.0])
 
 
+def test_a_real_time_priority_the_system_refuses_is_reported_to_the_station(buses, monkeypatch):
+    """The kernel's refusal (no CAP_SYS_NICE) is played by os.sched_setscheduler raising EPERM."""
+
+    def refuse(*_args):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr("os.sched_setscheduler", refuse)
+    agent_bus, _ = buses
+    agent, _ = make_agent(agent_bus, realtime_priority=10)
+    assert agent.state_body().scheduler == "SCHED_FIFO priority 10"  # asked, not yet refused
+    agent.start()
+    try:
+        wait_for(lambda: "refused" in agent.state_body().scheduler)
+    finally:
+        agent.stop()
+    again = msgspec.msgpack.decode(msgspec.msgpack.encode(agent.state_body()), type=wire.StateBody)
+    assert again.scheduler == "normal scheduler (SCHED_FIFO priority 10 refused: Operation not permitted)"
+
+
 def test_a_state_message_decodes_into_what_the_station_shows(buses):
     agent_bus, _ = buses
     agent, _ = make_agent(agent_bus)
