@@ -134,6 +134,16 @@ class OperatorPanel:
     # ---- building -----------------------------------------------------------------------------------------
 
     def _build_mission_window(self, gui: viser.GuiApi, initial: SceneView) -> None:
+        # The shortcut first: a page that shows the button already answers Shift+L (the other way round, a
+        # key pressed as the button appeared could be lost).
+        self.land_all_command = gui.add_command(
+            "LAND ALL",
+            description="Land every MAV where it is (asks to confirm)",
+            hotkey=LAND_ALL_HOTKEY,
+            modifier=LAND_ALL_MODIFIER,
+            icon=viser.Icon.PLANE_ARRIVAL,
+        )
+        self.land_all_command.on_trigger(self._on_land_all)
         self.mission_window = gui.add_panel()
         with self.mission_window.add_tab("Mission", viser.Icon.SHIELD_CHECK):
             self.header = gui.add_html(header_html(initial))
@@ -149,14 +159,6 @@ class OperatorPanel:
             )
         self.mission_window.float(x=12, y=-12, width=MISSION_WINDOW_WIDTH_PX)
         self.land_all_button.on_click(self._on_land_all)
-        self.land_all_command = gui.add_command(
-            "LAND ALL",
-            description="Land every MAV where it is (asks to confirm)",
-            hotkey=LAND_ALL_HOTKEY,
-            modifier=LAND_ALL_MODIFIER,
-            icon=viser.Icon.PLANE_ARRIVAL,
-        )
-        self.land_all_command.on_trigger(self._on_land_all)
 
     def _build_formation(self, gui: viser.GuiApi, initial: SceneView) -> None:
         self._status = gui.add_markdown(status_line(initial))

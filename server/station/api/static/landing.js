@@ -3,6 +3,9 @@
 "use strict";
 const view = document.getElementById("operator-view");
 if (view) {
+  // At once (the frame keeps the focus while its page loads) and again once loaded, in case the operator
+  // clicked the header meanwhile.
+  view.focus();
   view.addEventListener("load", () => view.focus());
 }
 const out = document.getElementById("sign-out");
