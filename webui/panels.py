@@ -47,6 +47,8 @@ NotifyColor = Literal["red", "green", "blue", "orange"]
 LAND_ALL_HOTKEY = "L"
 LAND_ALL_MODIFIER = "shift"
 LAND_ALL_SHORTCUT = "Shift+L"
+REFUSAL_SHOWN_S = 15.0
+"""Seconds a refusal or error stays on the page (a done note: 6 s): to be read after a glance away."""
 MISSION_WINDOW_WIDTH_PX = 430
 CONTROL_PANEL_WIDTH_PX = 470
 
@@ -310,11 +312,17 @@ class OperatorPanel:
             with acting_as(self._access.principal_of(client.client_id).for_command()):
                 action()
         except (ValueError, KeyError) as exc:
-            _notify(client, "Refused", str(exc), color="red")
+            _notify(client, "Refused", str(exc), color="red", seconds=REFUSAL_SHOWN_S)
             return False
         except Exception as exc:  # noqa: BLE001 - a bug in a command must not kill the GUI thread
             log.exception("operator action failed")
-            _notify(client, "Error", f"the ground station could not do this: {exc}", color="red")
+            _notify(
+                client,
+                "Error",
+                f"the ground station could not do this: {exc}",
+                color="red",
+                seconds=REFUSAL_SHOWN_S,
+            )
             return False
         if done:
             _notify(client, "Done", done, color="green")
