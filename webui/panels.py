@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import viser
@@ -36,6 +36,7 @@ from webui.alerts_panel import AlertsPanel
 from webui.camera import CameraDirector
 from webui.cards import alert_summary_html, header_html, legend_html
 from webui.geometry import ellipsoid_pose, ground_point
+from webui.notifications import NotifyColor, notify, remove_notification
 from webui.plots import LivePlots, PlotHistory
 from webui.scene import LEGEND, ellipsoid_label
 from webui.team_panel import TeamPanel
@@ -43,12 +44,9 @@ from webui.view import OperatorActions, SceneView
 
 log = logging.getLogger(__name__)
 
-NotifyColor = Literal["red", "green", "blue", "orange"]
 LAND_ALL_HOTKEY = "L"
 LAND_ALL_MODIFIER = "shift"
 LAND_ALL_SHORTCUT = "Shift+L"
-REFUSAL_SHOWN_S = 15.0
-"""Seconds a refusal or error stays on the page (a done note: 6 s): to be read after a glance away."""
 MISSION_WINDOW_WIDTH_PX = 430
 CONTROL_PANEL_WIDTH_PX = 470
 
@@ -286,14 +284,14 @@ class OperatorPanel:
             else:
                 follow = not self._camera.following(client.client_id)
                 self._camera.set_following(client, follow, self._view)
-                _notify(
+                notify(
                     client,
                     "View",
                     "Following the person" if follow else "Stopped following the person",
                     color="blue",
                 )
         except (AssertionError, ValueError) as exc:  # the client has not reported its camera yet
-            _notify(client, "View", f"the camera is not ready yet, try again ({exc})", color="red")
+            notify(client, "View", f"the camera is not ready yet, try again ({exc})", color="red")
 
     def clicked(self, action: Callable[[], object], done: str | None) -> Callable[[viser.GuiEvent], None]:
         """A button callback that runs `action` for the client that clicked (see `_run`)."""
@@ -312,25 +310,24 @@ class OperatorPanel:
             with acting_as(self._access.principal_of(client.client_id).for_command()):
                 action()
         except (ValueError, KeyError) as exc:
-            _notify(client, "Refused", str(exc), color="red", seconds=REFUSAL_SHOWN_S)
+            notify(client, "Refused", str(exc), color="red")
             return False
         except Exception as exc:  # noqa: BLE001 - a bug in a command must not kill the GUI thread
             log.exception("operator action failed")
-            _notify(
+            notify(
                 client,
                 "Error",
                 f"the ground station could not do this: {exc}",
                 color="red",
-                seconds=REFUSAL_SHOWN_S,
             )
             return False
         if done:
-            _notify(client, "Done", done, color="green")
+            notify(client, "Done", done, color="green")
         return True
 
     def _announce(self, title: str, body: str, color: NotifyColor) -> None:
         for client in list(self._server.get_clients().values()):
-            _notify(client, title, body, color=color, seconds=8.0)
+            notify(client, title, body, color=color, seconds=8.0)
 
     def _on_formation_input(self, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own refresh, not an operator
@@ -396,9 +393,9 @@ class OperatorPanel:
             if not self._click_registered:
                 self._server.scene.on_click()(self._on_scene_click)
                 self._click_registered = True
-        _remove_notification(stale)
+        remove_notification(stale)
         # The prompt stays until the click arrives (or 60 s), then goes: never two prompts for one placement.
-        prompt = _notify(
+        prompt = notify(
             event.client,
             "Place obstacle",
             "Click on the ground where the obstacle should stand.",
@@ -410,7 +407,7 @@ class OperatorPanel:
             if waiting:
                 self._pending_clicks[client_id] = (self._pending_clicks[client_id][0], prompt)
         if not waiting:  # the click came before the prompt was shown
-            _remove_notification(prompt)
+            remove_notification(prompt)
 
     def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
         with self._lock:
@@ -418,12 +415,12 @@ class OperatorPanel:
             if not self._pending_clicks and self._click_registered:
                 self._server.scene.remove_click_callback(self._on_scene_click)
                 self._click_registered = False
-        _remove_notification(prompt)
+        remove_notification(prompt)
         if radius is None:
             return
         point = ground_point(np.asarray(event.ray_origin), np.asarray(event.ray_direction))
         if point is None:
-            _notify(
+            notify(
                 event.client,
                 "Refused",
                 "That click did not hit the ground: press Add obstacle again and click on the grid.",
@@ -499,26 +496,3 @@ def _set_range(slider: Any, low: float, high: float) -> None:
         slider.min = low
     if slider.max != high:
         slider.max = high
-
-
-def _notify(
-    client: viser.ClientHandle | None, title: str, body: str, *, color: NotifyColor, seconds: float = 6.0
-) -> viser.NotificationHandle | None:
-    """Show a notification on one page; its handle (None when there is no page or it has gone away)."""
-    if client is None:
-        return None
-    try:
-        return client.add_notification(title, body, auto_close_seconds=seconds, color=color)
-    except Exception:  # noqa: BLE001 - the client may have gone away
-        log.debug("could not notify client", exc_info=True)
-        return None
-
-
-def _remove_notification(handle: viser.NotificationHandle | None) -> None:
-    """Take a notification off its page (already closed or page gone: nothing to do)."""
-    if handle is None:
-        return
-    try:
-        handle.remove()
-    except Exception:  # noqa: BLE001 - the client may have gone away
-        log.debug("could not remove a notification", exc_info=True)
