@@ -177,8 +177,8 @@ class OnboardAgent:
         self.loop_errors = 0
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self.scheduler = realtime.describe(self.params.realtime_priority)
-        """What the control loop runs under (realtime.describe), a refusal included once run() has asked."""
+        # What the control loop runs under, a refusal included once run() has asked; cut to fit the wire.
+        self.scheduler = self._scheduler_text(None)
         team = bus.team
         self._state_key = agent_key(team, self.vehicle_id, "state")
         self._ack_key = agent_key(team, self.vehicle_id, "ack")
@@ -205,12 +205,16 @@ class OnboardAgent:
         if self._thread is not None:
             self._thread.join(timeout_s)
 
+    def _scheduler_text(self, refused: str | None) -> str:
+        """realtime.describe of this agent's priority, cut to the wire's text limit (sent at every state)."""
+        return realtime.describe(self.params.realtime_priority, refused)[: wire.MAX_TEXT]
+
     def run(self) -> None:
         """Tick at rate_hz on the monotonic clock until stopped; a late tick re-anchors (counted), never
         bunches; an exception in a tick is counted and logged, the loop goes on."""
         realtime.name_calling_thread(realtime.control_thread_name(self.vehicle_id))
         refused = realtime.raise_calling_thread(self.params.realtime_priority)
-        self.scheduler = realtime.describe(self.params.realtime_priority, refused)
+        self.scheduler = self._scheduler_text(refused)
         if refused is not None:
             log.warning(
                 "agent %d: %s: the control loop runs under the normal scheduler", self.vehicle_id, refused
@@ -406,7 +410,7 @@ class OnboardAgent:
             hb_stamp=heartbeat[0] if heartbeat is not None else None,
             hb_received=heartbeat[1] if heartbeat is not None else None,
             station_lost=self.station_lost,
-            scheduler=self.scheduler[: wire.MAX_TEXT],
+            scheduler=self.scheduler,
             camera=_camera_counts(self.converter.stats()),
         )
 
