@@ -4,6 +4,7 @@ running faster than real time: loading, the scene, the controls, confirmations, 
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from urllib.parse import urlsplit
 
@@ -19,7 +20,7 @@ from live_harness import (
     open_tab,
     scene_canvas,
 )
-from playwright.sync_api import expect
+from playwright.sync_api import Locator, expect
 
 from vehicles.mission import Phase
 
@@ -117,34 +118,45 @@ def clear_ground_point(live, camera) -> tuple[np.ndarray, tuple[float, float]]:
 
 
 PROMPT = "Click on the ground where the obstacle should stand."
+OUTCOME = re.compile(r"obstacle", re.IGNORECASE)  # every answer to a placement names the obstacle
 
 
-def start_placing_an_obstacle(frame) -> None:
-    """Press "Add obstacle" and wait for the station's prompt: it comes after the station asked the page for
-    scene clicks, so a click from now on reaches it (one sooner is not sent at all)."""
-    frame.get_by_text("Add obstacle, then click the ground", exact=True).click()
-    expect(frame.get_by_text(PROMPT, exact=True)).to_be_visible()
+def place_obstacle(opened, where: Callable[[], tuple[float, float]], attempts: int = 3) -> Locator:
+    """Place an obstacle as an operator does: press "Add obstacle", wait for the station's prompt, click the
+    3-D canvas at `where()` (x, y fractions of its size) and read the station's answer, a notification that
+    names the obstacle (added, or refused and why); returns that notification.
 
-
-def click_ground(opened, where: Callable[[], tuple[float, float]], attempts: int = 4) -> None:
-    """Click the 3-D canvas at `where()` (x, y fractions of its size) until the station takes the click,
-    which it shows by removing its prompt. At once, with no waiting for animations to settle (the scene
-    moves while a software-rendered browser takes its time). Clicking again is what an operator does when a
-    click is lost: under the full suite's load chromium sometimes drops one (the prompt stayed and no click
-    reached the station); a click after the station took one is ignored, as nothing waits for it any more."""
-    canvas = scene_canvas(opened.operator)
-    prompt = opened.operator.get_by_text(PROMPT, exact=True)
-    for _ in range(attempts):
-        size = canvas.bounding_box()
-        assert size is not None
-        fx, fy = where()
-        canvas.click(position={"x": fx * size["width"], "y": fy * size["height"]}, force=True)
-        try:
-            expect(prompt).to_be_hidden(timeout=4000)
-            return
-        except AssertionError:
+    Clicks go at once, with no waiting for animations to settle (the scene moves while a software-rendered
+    browser takes its time). Under the full suite's load chromium sometimes drops a click (the prompt stays):
+    the operator clicks again. If the prompt went but no answer came, the operator starts again; the failure
+    says what each attempt saw."""
+    frame = opened.operator
+    canvas = scene_canvas(frame)
+    prompt = frame.get_by_text(PROMPT, exact=True)
+    answers = frame.get_by_role("alert").filter(has_text=OUTCOME)
+    expect(answers).to_have_count(0, timeout=20_000)  # an earlier answer is not this placement's
+    seen = []
+    for attempt in range(attempts):
+        frame.get_by_text("Add obstacle, then click the ground", exact=True).click()
+        expect(prompt).to_be_visible()
+        for click in range(4):
+            size = canvas.bounding_box()
+            assert size is not None
+            fx, fy = where()
+            canvas.click(position={"x": fx * size["width"], "y": fy * size["height"]}, force=True)
+            try:
+                expect(prompt).to_be_hidden(timeout=4000)
+                break
+            except AssertionError:
+                seen.append(f"attempt {attempt}: click {click} at ({fx:.2f}, {fy:.2f}) not taken")
+        else:
             continue
-    raise AssertionError(f"the station took none of {attempts} clicks on the ground")
+        try:
+            expect(answers.first).to_be_visible(timeout=10_000)
+            return answers.first
+        except AssertionError:
+            seen.append(f"attempt {attempt}: the prompt went and no answer came within 10 s")
+    raise AssertionError("the station answered none of the placements: " + "; ".join(seen))
 
 
 def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_api(live, operator_page):
@@ -154,9 +166,9 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     radius = number_input(operator_page.operator, "radius (m)")
     radius.fill("1")
     radius.press("Enter")
-    start_placing_an_obstacle(operator_page.operator)
     point, fraction = clear_ground_point(live, camera)
-    click_ground(operator_page, lambda: fraction)
+    answer = place_obstacle(operator_page, lambda: fraction)
+    expect(answer).to_contain_text("Obstacle of radius 1.0 m added")  # a failure prints the answer shown
     live.wait_for(
         lambda: {o.obstacle_id for o in live.station.snapshot().obstacles} != before,
         sim_s=20.0,
@@ -181,20 +193,25 @@ def test_an_obstacle_clicked_onto_the_person_is_refused_with_a_notification(live
     radius.fill("5")  # the person walks on while the browser clicks: cover 6.5 m about them
     radius.press("Enter")
     # Look at the person, so that they show in the middle of the canvas, clear of the floating windows and
-    # notifications at its edges (where the default view may show them as they walk).
+    # notifications at its edges (where the default view may show them as they walk). Aim only once the
+    # page reports the camera there: a report from its way there would aim the click elsewhere.
     kept = (np.array(camera.position), np.array(camera.look_at))
-    camera.look_at = live.station.snapshot().person_truth.position_m * [1.0, 1.0, 0.0]
-    asked_s = camera.update_timestamp  # the page's own report of its camera comes later
-    live.wait_for(lambda: camera.update_timestamp > asked_s, sim_s=20.0, what="the page turns its camera")
+    target = live.station.snapshot().person_truth.position_m * [1.0, 1.0, 0.0]
+    camera.look_at = target
+    live.wait_for(
+        lambda: np.linalg.norm(np.asarray(camera.look_at) - target) < 0.5,
+        sim_s=20.0,
+        what="the page turns its camera to the person",
+    )
 
     def person_on_the_canvas() -> tuple[float, float]:
         person = np.asarray(live.station.snapshot().person_truth.position_m)
         return ground_to_canvas_fraction(camera, person * [1.0, 1.0, 0.0])
 
     try:
-        start_placing_an_obstacle(operator_page.operator)
-        click_ground(operator_page, person_on_the_canvas)
-        expect(operator_page.operator.get_by_text("would cover the person", exact=False)).to_be_visible()
+        answer = place_obstacle(operator_page, person_on_the_canvas)
+        expect(answer).to_contain_text("Refused")
+        expect(answer).to_contain_text("would cover the person")  # a failure prints the answer shown
         assert [o.obstacle_id for o in live.station.snapshot().obstacles] == before
     finally:
         camera.position, camera.look_at = kept
