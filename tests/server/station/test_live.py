@@ -144,6 +144,26 @@ async def test_pace_and_capacity_drop_when_the_ticks_get_slow():
     assert pace.fell_behind > 0
 
 
+async def test_a_loop_slowed_to_half_speed_shows_below_the_alert_floor_after_its_second_slow_tick():
+    clock = FakeClock()
+    station = CountingStation(clock, tick_cost_s=0.005)
+    runner = LiveRunner(station=station, speed=1.0, clock=clock, sleep=clock.sleep)
+    await run_for(runner, clock, 1.0)
+    capacity_before: list[float | None] = []  # [k]: the capacity reported after k slow ticks
+    normal_tick = station.tick
+
+    def slow_tick() -> None:  # each 0.05 s tick now costs 0.1 s: half of real time
+        capacity_before.append(runner.pace().capacity)
+        station.tick_cost_s = 0.1
+        normal_tick()
+
+    station.tick = slow_tick
+    await run_for(runner, clock, 1.5)
+    assert len(capacity_before) >= 3
+    assert capacity_before[1] == pytest.approx(3 * 0.05 / 0.11, rel=0.01)  # one slow tick: still above 0.8
+    assert capacity_before[2] == pytest.approx(3 * 0.05 / 0.205, rel=0.01)  # two: 0.73, below the floor
+
+
 async def test_capacity_shows_the_speed_the_ticks_computing_time_allows():
     clock = FakeClock()
     station = CountingStation(clock, tick_cost_s=0.01)  # a 0.05 s tick computed in 0.01 s: 5x at most
