@@ -135,21 +135,11 @@ def place_obstacle(opened, where: Callable[[], tuple[float, float]], attempts: i
     prompt = frame.get_by_text(PROMPT, exact=True)
     answers = frame.get_by_role("alert").filter(has_text=OUTCOME)
     expect(answers).to_have_count(0, timeout=20_000)  # an earlier answer is not this placement's
-    seen = []
+    seen: list[str] = []
     for attempt in range(attempts):
         frame.get_by_text("Add obstacle, then click the ground", exact=True).click()
         expect(prompt).to_be_visible()
-        for click in range(4):
-            size = canvas.bounding_box()
-            assert size is not None
-            fx, fy = where()
-            canvas.click(position={"x": fx * size["width"], "y": fy * size["height"]}, force=True)
-            try:
-                expect(prompt).to_be_hidden(timeout=4000)
-                break
-            except AssertionError:
-                seen.append(f"attempt {attempt}: click {click} at ({fx:.2f}, {fy:.2f}) not taken")
-        else:
+        if not click_until_taken(canvas, prompt, where, seen):
             continue
         try:
             expect(answers.first).to_be_visible(timeout=10_000)
@@ -157,6 +147,28 @@ def place_obstacle(opened, where: Callable[[], tuple[float, float]], attempts: i
         except AssertionError:
             seen.append(f"attempt {attempt}: the prompt went and no answer came within 10 s")
     raise AssertionError("the station answered none of the placements: " + "; ".join(seen))
+
+
+def click_until_taken(
+    canvas: Locator,
+    prompt: Locator,
+    where: Callable[[], tuple[float, float]],
+    seen: list[str],
+    clicks: int = 4,
+) -> bool:
+    """Click the canvas at `where()` until the prompt goes (the station took a click); False if none of
+    `clicks` was taken, each lost click noted in `seen`."""
+    for click in range(clicks):
+        size = canvas.bounding_box()
+        assert size is not None
+        fx, fy = where()
+        canvas.click(position={"x": fx * size["width"], "y": fy * size["height"]}, force=True)
+        try:
+            expect(prompt).to_be_hidden(timeout=4000)
+            return True
+        except AssertionError:
+            seen.append(f"click {click} at ({fx:.2f}, {fy:.2f}) not taken")
+    return False
 
 
 def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_api(live, operator_page):
