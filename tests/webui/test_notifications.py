@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import pytest
+import viser
 
 from webui.notifications import NOTE_SHOWN_S, REFUSAL_SHOWN_S, notify, remove_notification
 
@@ -25,9 +28,14 @@ class GoneClient:
         raise RuntimeError("client disconnected")
 
 
+def as_client(double: RecordingClient | GoneClient) -> viser.ClientHandle:
+    """A test double, typed as the viser client it stands in for (it has the one method notify calls)."""
+    return cast(viser.ClientHandle, double)
+
+
 def test_a_red_notification_stays_as_long_as_a_refusal_whoever_shows_it():
     client = RecordingClient()
-    notify(client, "Refused", "That click did not hit the ground", color="red")
+    notify(as_client(client), "Refused", "That click did not hit the ground", color="red")
     assert client.shown == [("Refused", "That click did not hit the ground", REFUSAL_SHOWN_S, "red")]
     assert REFUSAL_SHOWN_S == pytest.approx(15.0)
 
@@ -35,18 +43,18 @@ def test_a_red_notification_stays_as_long_as_a_refusal_whoever_shows_it():
 @pytest.mark.parametrize("color", ["green", "blue", "orange"])
 def test_other_notifications_stay_as_long_as_a_note(color):
     client = RecordingClient()
-    notify(client, "Done", "Obstacle added", color=color)
+    notify(as_client(client), "Done", "Obstacle added", color=color)
     assert client.shown[0][2] == pytest.approx(NOTE_SHOWN_S)
     assert NOTE_SHOWN_S < REFUSAL_SHOWN_S
 
 
 def test_a_caller_may_keep_a_prompt_up_longer():
     client = RecordingClient()
-    notify(client, "Place obstacle", "Click on the ground", color="blue", seconds=60.0)
+    notify(as_client(client), "Place obstacle", "Click on the ground", color="blue", seconds=60.0)
     assert client.shown[0][2] == pytest.approx(60.0)
 
 
 def test_a_page_that_has_gone_gets_no_notification_and_nothing_raises():
-    assert notify(GoneClient(), "Refused", "x", color="red") is None
+    assert notify(as_client(GoneClient()), "Refused", "x", color="red") is None
     assert notify(None, "Refused", "x", color="red") is None
     remove_notification(None)
