@@ -180,7 +180,12 @@ def _make_agent(*, vehicle_id, team_size, config, params, method, autopilot_fact
     warm_up(ControllerParams(method=method))  # the compiled kernels, before the agent's first tick
     realtime.shorten_gil_switch_interval()
 
-    bus = Bus(config, sender=vehicle_id, is_member=lambda s: 0 <= s <= team_size)
+    bus = Bus(
+        config,
+        sender=vehicle_id,
+        is_member=lambda s: 0 <= s <= team_size,
+        handler_priority=realtime.handler_priority(params.realtime_priority),
+    )
     try:
         autopilot = autopilot_factory(bus)
         onboard = OnboardAgent(

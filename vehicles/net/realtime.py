@@ -11,7 +11,9 @@ says why.
 The control thread is also named at the system level (`control_thread_name`), so `top -H` and `ps -L` show
 which thread it is. A Python thread also waits for the interpreter lock: `GIL_SWITCH_INTERVAL_S` bounds how
 long another thread of the agent (Zenoh callbacks, the vehicle link) holds it before the control thread
-gets it.
+gets it; and the threads that run Zenoh's message handlers take SCHED_FIFO one priority below the control
+loop (`handler_priority`), so that normal work cannot preempt one while it holds the lock the control
+thread waits for.
 """
 
 from __future__ import annotations
@@ -47,6 +49,14 @@ def raise_calling_thread(priority: int) -> str | None:
     except OSError as exc:
         return f"SCHED_FIFO priority {priority} refused: {exc.strerror or exc}"
     return None
+
+
+def handler_priority(control_priority: int) -> int:
+    """The SCHED_FIFO priority of the threads that run message handlers in a process whose control loop runs
+    at control_priority: one below it (never below 1), so that a handler holding the interpreter lock runs
+    ahead of normal work and hands the lock back, and the control loop still preempts it; 0 for 0."""
+    check_priority(control_priority)
+    return max(control_priority - 1, 1) if control_priority else 0
 
 
 def describe(priority: int, refused: str | None = None) -> str:

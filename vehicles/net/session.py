@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from vehicles.net import wire
+from vehicles.net import realtime, wire
 from vehicles.net.guard import MessageGuard, Received
 from vehicles.net.keys import check_team
 
@@ -81,6 +81,8 @@ class Bus:
 
     sender: this process's id (0 for the station); senders it publishes for (a simulated world plays every
     vehicle) pass `sender=` per message. is_member: which sender ids the guard admits. clock: UTC seconds.
+    handler_priority: the SCHED_FIFO priority Zenoh's callback threads take at their first message (0: the
+    normal scheduler; `realtime.handler_priority`).
     """
 
     def __init__(
@@ -91,6 +93,7 @@ class Bus:
         is_member: Callable[[int], bool],
         clock: Callable[[], float] = time.time,
         session=None,
+        handler_priority: int = 0,
     ) -> None:
         import zenoh
 
@@ -109,6 +112,9 @@ class Bus:
         self.sent_messages = 0
         self.handler_errors = 0
         self._closed = False
+        realtime.check_priority(handler_priority)
+        self._handler_priority = handler_priority
+        self._raised_threads: set[int] = set()
 
     def publish(self, key: str, body: wire.Body, *, sender: int | None = None) -> int:
         """Stamp and publish `body` on `key`; returns the bytes sent (0 when closed)."""
@@ -139,6 +145,7 @@ class Bus:
         raises is counted (`handler_errors`) and logged, never propagated."""
 
         def on_sample(sample) -> None:
+            self._raise_handler_thread()
             try:
                 received = self.guard.admit(str(sample.key_expr), sample.payload.to_bytes())
                 if received is not None:
@@ -148,6 +155,18 @@ class Bus:
                 log.exception("handling a message on %s failed", key)
 
         self._subscribers.append(self._session.declare_subscriber(key, on_sample))
+
+    def _raise_handler_thread(self) -> None:
+        """Put the calling Zenoh thread under SCHED_FIFO at handler_priority, once per thread. A handler
+        holds the interpreter lock; preempted by normal work while it does, it would keep a real-time control
+        thread waiting for the lock for a whole time slice."""
+        ident = threading.get_ident()
+        if self._handler_priority == 0 or ident in self._raised_threads:
+            return
+        self._raised_threads.add(ident)
+        refused = realtime.raise_calling_thread(self._handler_priority)
+        if refused is not None:
+            log.warning("Zenoh's message handlers run under the normal scheduler: %s", refused)
 
     def peers(self) -> Sequence[str]:
         """The Zenoh ids of the peers this session is connected to."""

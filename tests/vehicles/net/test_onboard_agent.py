@@ -4,9 +4,13 @@ the station's loss lands the MAV; teammates heard make the roster."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import socket
 import sys
+import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import msgspec
@@ -18,6 +22,7 @@ from vehicles.net import wire
 from vehicles.net.guard import Received
 from vehicles.net.keys import agent_key, all_agents_key, station_key
 from vehicles.net.onboard import OnboardAgent, OnboardParams
+from vehicles.net.realtime import handler_priority, policy, raise_calling_thread
 from vehicles.net.session import Bus, NetConfig
 from vehicles.pilot import Phase
 
@@ -39,13 +44,15 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.fixture
-def buses():
+@contextlib.contextmanager
+def bus_pair(**agent_bus_options) -> Iterator[tuple[Bus, Bus]]:
+    """The agent's bus listening on a free port and another process's bus connected to it, peered."""
     port = free_port()
     agent_bus = Bus(
         NetConfig(team=TEAM, listen=(f"tcp/127.0.0.1:{port}",), multicast_scouting=False),
         sender=1,
         is_member=lambda s: 0 <= s <= 3,
+        **agent_bus_options,
     )
     other = Bus(
         NetConfig(team=TEAM, connect=(f"tcp/127.0.0.1:{port}",), multicast_scouting=False),
@@ -56,9 +63,17 @@ def buses():
     while not agent_bus.peers() and time.monotonic() < deadline:
         time.sleep(0.05)
     time.sleep(0.3)  # let the subscriptions propagate
-    yield agent_bus, other
-    other.close()
-    agent_bus.close()
+    try:
+        yield agent_bus, other
+    finally:
+        other.close()
+        agent_bus.close()
+
+
+@pytest.fixture
+def buses():
+    with bus_pair() as pair:
+        yield pair
 
 
 def make_agent(bus: Bus, **params) -> tuple[OnboardAgent, StubAutopilot]:
@@ -252,3 +267,21 @@ def test_a_state_message_decodes_into_what_the_station_shows(buses):
     again = msgspec.msgpack.decode(msgspec.msgpack.encode(body), type=wire.StateBody)
     assert again.phase == "idle" and again.autopilot is not None
     assert again.autopilot.position_m == (8.0, 0.0, 0.0)
+
+
+def test_message_handlers_run_under_sched_fifo_one_below_the_control_loop():
+    """With handler_priority set, Zenoh's thread takes SCHED_FIFO at its first message, so that normal work
+    cannot preempt a handler holding the interpreter lock the control loop waits for (where the system
+    refuses SCHED_FIFO, the handlers run on under the normal scheduler)."""
+    assert handler_priority(10) == 9 and handler_priority(1) == 1 and handler_priority(0) == 0
+    probe: list[str | None] = []
+    thread = threading.Thread(target=lambda: probe.append(raise_calling_thread(9)))
+    thread.start()
+    thread.join()
+    seen: list[tuple[int, int]] = []
+    key = station_key(TEAM, "heartbeat")
+    with bus_pair(handler_priority=handler_priority(10)) as (agent_bus, other):
+        agent_bus.subscribe(key, lambda _msg: seen.append((policy(), os.sched_getparam(0).sched_priority)))
+        wait_for(lambda: bool(seen), resend=lambda: other.publish(key, wire.HeartbeatBody()))
+    assert seen[0] == ((os.SCHED_FIFO, 9) if probe == [None] else (os.SCHED_OTHER, 0))
+    assert agent_bus.handler_errors == 0
