@@ -16,12 +16,13 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from fifo_probe import fifo_allowed
 
 from server.lab.metrics import spacing_error_deg
 from server.station.agents_mode import AgentsStation, build_spawn_station
 from server.station.live import Urls, serve_station
 from vehicles.mission import Phase
-from vehicles.net.realtime import control_thread_name, policy, raise_calling_thread
+from vehicles.net.realtime import control_thread_name, policy
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
@@ -43,15 +44,6 @@ def control_loop_policies(agents: AgentsStation) -> list[int | None]:
                 continue
         out.append(found)
     return out
-
-
-def fifo_allowed() -> bool:
-    """Whether this system lets a process of ours run a thread under SCHED_FIFO (root or an rtprio limit)."""
-    result: list[str | None] = []
-    probe = threading.Thread(target=lambda: result.append(raise_calling_thread(REALTIME_PRIORITY)))
-    probe.start()
-    probe.join()
-    return result == [None]
 
 
 @dataclass
@@ -168,7 +160,7 @@ def test_operator_page_drives_the_agents_and_shows_their_acknowledgements(spawne
 def test_the_agents_control_loops_run_under_sched_fifo_where_the_system_allows_it(spawned):
     """`--realtime-priority` puts each agent's control thread under SCHED_FIFO; where the system refuses it
     (no CAP_SYS_NICE), the loops run under the normal scheduler."""
-    expected = [os.SCHED_FIFO if fifo_allowed() else os.SCHED_OTHER] * VEHICLES
+    expected = [os.SCHED_FIFO if fifo_allowed(REALTIME_PRIORITY) else os.SCHED_OTHER] * VEHICLES
     deadline = time.monotonic() + 60.0  # the agents start their loops after their imports and warm-up
     while None in control_loop_policies(spawned.agents) and time.monotonic() < deadline:
         time.sleep(0.5)

@@ -160,8 +160,10 @@ class Bus:
         """Put the calling Zenoh thread under SCHED_FIFO at handler_priority, once per thread. A handler
         holds the interpreter lock; preempted by normal work while it does, it would keep a real-time control
         thread waiting for the lock for a whole time slice."""
+        if self._handler_priority == 0:
+            return
         ident = threading.get_ident()
-        if self._handler_priority == 0 or ident in self._raised_threads:
+        if ident in self._raised_threads:
             return
         self._raised_threads.add(ident)
         refused = realtime.raise_calling_thread(self._handler_priority)
