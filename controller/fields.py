@@ -130,6 +130,7 @@ class TeammatePaths:
     break exact ties; in_formation: (J,) bool, only these count for K and the angular term (all are avoided);
     d_max_m: (J,) the teammate-repulsion d_max of eq. 15 for each (covariance radii and message age included).
     rejected: plans dropped for non-finite or absurd numbers while building this.
+    ages_s: (J,) each plan's age at now (s); None: all fresh (0).
     """
 
     positions_m: np.ndarray
@@ -137,6 +138,12 @@ class TeammatePaths:
     in_formation: np.ndarray
     d_max_m: np.ndarray
     rejected: int = 0
+    ages_s: np.ndarray | None = None
+
+    @property
+    def ages(self) -> np.ndarray:
+        """(J,) each plan's age (s), zeros when not given."""
+        return np.zeros(self.count) if self.ages_s is None else self.ages_s
 
     @classmethod
     def empty(cls, steps: int, *, rejected: int = 0) -> TeammatePaths:
@@ -346,7 +353,7 @@ def teammate_paths(
     )
     ids = np.array([p.vehicle_id for p in plans], dtype=int)
     in_formation = np.array([p.in_formation for p in plans], dtype=bool)
-    return TeammatePaths(paths, ids, in_formation, d_max, rejected)
+    return TeammatePaths(paths, ids, in_formation, d_max, rejected, np.maximum(now_s - stamps, 0.0))
 
 
 # --------------------------------------------------------------------------------------------- the terms

@@ -44,6 +44,7 @@ from controller.messages import (
 )
 from controller.mpc import ModelPredictiveController, MpcParams, braking_plan, predict
 from controller.params import ControllerParams, FormationParams, Method
+from controller.separation import SeparationRows, separation_rows
 from controller.reference import (
     bearing_rad,
     clip_into,
@@ -63,7 +64,8 @@ class ControllerStats:
     ticks = solved + braking + no_person. rejected_plans / rejected_obstacles: teammate plans and obstacles
     dropped for non-finite numbers (or a plan carrying our own id); rejected_inputs: ticks whose own state,
     person estimate, time or formation parameters were not usable; field_faults: non-finite external-input
-    totals replaced by zero; ignored_bearings: non-finite preferred bearings ignored.
+    totals replaced by zero; ignored_bearings: non-finite preferred bearings ignored; escapes: of the solved
+    ticks, those whose separation rows could not all hold, flown as an escape (docs/safety.md).
     """
 
     ticks: int = 0
@@ -75,6 +77,7 @@ class ControllerStats:
     rejected_inputs: int = 0
     field_faults: int = 0
     ignored_bearings: int = 0
+    escapes: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,11 +194,14 @@ class FormationController:
         price = self._method == Method.PRICE
         obstacle_set = self._obstacles(obstacles)
         mates = self._teammates(teammates, now_s, own)
+        own_path, own_vel = self._own_horizon(tick)
         if price:
             f_total = np.zeros((self._steps, 3))
         else:
-            f_total = self._inputs(tick, person, mates, obstacle_set, formation)
+            f_total = self._inputs(tick, person, mates, obstacle_set, formation, own_path, own_vel)
         target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
+        rows = self._separation(own, own_path, own_vel, mates, obstacle_set)
+        planes = rows.planes if rows is not None and rows.count else None
 
         sol = self._mpc.solve(
             position_m=start_p,
@@ -203,7 +209,24 @@ class FormationController:
             target_position_m=target,
             target_velocity_mps=target_v,
             external_inputs_mps2=f_total,
+            half_planes=planes,
         )
+        escape = None
+        if (
+            sol.ok
+            and rows is not None
+            and sol.half_plane_violation_m > self._params.separation.escape_violation_m
+        ):
+            escape = f"escape: separation rows missed by {sol.half_plane_violation_m:.2f} m"
+            target, target_v = self._escape_target(tick, mates, rows)
+            sol = self._mpc.solve(
+                position_m=start_p,
+                velocity_mps=start_v,
+                target_position_m=target,
+                target_velocity_mps=target_v,
+                external_inputs_mps2=f_total,
+                half_planes=planes,
+            )
         if not sol.ok:
             return self._brake(
                 tick,
@@ -238,15 +261,17 @@ class FormationController:
             return self._brake(tick, SolveStatus.BRAKING, "the way-point was not finite")
         self._prev_plan = plan
         self._counts["solved"] += 1
+        if escape is not None:
+            self._counts["escapes"] += 1
         yaw = bearing_rad(from_m=wp_p, to_m=np.asarray(person.position_m, dtype=float))
         return ControlOutput(
             plan=plan,
             waypoint_position_m=wp_p,
             waypoint_velocity_mps=wp_v,
             yaw_rad=yaw,
-            status=SolveStatus.SOLVED,
+            status=SolveStatus.SOLVED if escape is None else SolveStatus.ESCAPE,
             external_inputs=f_total,
-            fault=None,
+            fault=escape,
             solver_iterations=sol.iterations,
             solver_time_s=sol.solve_time_s,
         )
@@ -360,18 +385,11 @@ class FormationController:
         mates: TeammatePaths,
         obstacle_set: ObstacleSet,
         formation: FormationParams,
+        own_path: np.ndarray,
+        own_vel: np.ndarray,
     ) -> np.ndarray:
-        """(N+1, 3) clamped external inputs on the previous plan, moved to begin at the start state."""
+        """(N+1, 3) clamped external inputs on our previous plan (`_own_horizon`)."""
         prm = self._params
-        if self._prev_plan is not None:
-            own_path, own_vel = self._previous_plan_on_horizon(tick.now_s)
-            own_path = own_path + (tick.start_p - own_path[0])
-        else:
-            own_path = np.repeat(tick.start_p[None, :], self._steps, axis=0)
-            own_vel = np.repeat(tick.start_v[None, :], self._steps, axis=0)
-        # The braking margin needs the vehicle's velocity, not the plan's: the follower lags the plan.
-        measured_v = np.asarray(tick.own.velocity_mps, dtype=float)
-        own_vel = own_vel + ((measured_v if _finite(measured_v) else tick.start_v) - own_vel[0])
         person_p = np.asarray(person.position_m, dtype=float)
         if prm.reference.predict_person:
             person_v = np.asarray(person.velocity_mps, dtype=float)
@@ -392,6 +410,61 @@ class FormationController:
         if ext.fault:
             self._counts["field_faults"] += 1
         return ext.total
+
+    def _own_horizon(self, tick: _Tick) -> tuple[np.ndarray, np.ndarray]:
+        """(N+1, 3) positions and velocities of our previous plan on this tick's horizon, moved to begin at
+        the start state (a hover there before the first plan). The velocities begin at the measured velocity:
+        the braking margins need the vehicle's, and the follower lags the plan."""
+        if self._prev_plan is not None:
+            own_path, own_vel = self._previous_plan_on_horizon(tick.now_s)
+            own_path = own_path + (tick.start_p - own_path[0])
+        else:
+            own_path = np.repeat(tick.start_p[None, :], self._steps, axis=0)
+            own_vel = np.repeat(tick.start_v[None, :], self._steps, axis=0)
+        measured_v = np.asarray(tick.own.velocity_mps, dtype=float)
+        own_vel = own_vel + ((measured_v if _finite(measured_v) else tick.start_v) - own_vel[0])
+        return own_path, own_vel
+
+    def _separation(
+        self,
+        own: VehicleState,
+        own_path: np.ndarray,
+        own_vel: np.ndarray,
+        mates: TeammatePaths,
+        obstacle_set: ObstacleSet,
+    ) -> SeparationRows | None:
+        """This tick's separation rows (controller/separation.py), or None when they are switched off."""
+        prm = self._params
+        if not prm.separation.enabled:
+            return None
+        return separation_rows(
+            own_path_m=own_path,
+            own_velocities_mps=own_vel,
+            mates=mates,
+            mate_ages_s=mates.ages,
+            inflation_m=mates.d_max_m - prm.fields.teammate_d_max_base_m,
+            obstacles=obstacle_set,
+            own_cov_radius_m=min(self._own_cov_radius(own), prm.fields.covariance_radius_cap_m),
+            dt_s=self._mpc_params.dt_s,
+            own_id=self._id,
+            params=prm.separation,
+        )
+
+    def _escape_target(
+        self, tick: _Tick, mates: TeammatePaths, rows: SeparationRows
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where an escape aims: rest at the start position, moved vertically away from the closest
+        teammate when it is within separation_m horizontally (up when level or above it), inside the arena."""
+        mp = self._mpc_params
+        target = tick.start_p.copy()
+        j = rows.closest_teammate_index
+        if j >= 0:
+            mate = mates.positions_m[j, 0]
+            gap = tick.start_p - mate
+            if math.hypot(gap[0], gap[1]) < self._params.separation.separation_m:
+                climb = self._params.separation.escape_climb_m
+                target[2] = mate[2] + (climb if gap[2] >= 0.0 else -climb)
+        return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
 
     def _previous_plan_on_horizon(self, now_s: float) -> tuple[np.ndarray, np.ndarray]:
         """The previous plan's positions and velocities (N+1, 3) at now_s + n dt (fields.plan_path and

@@ -15,6 +15,7 @@ from controller.fields import FieldParams
 from controller.measurement import NoiseParams
 from controller.mpc import MpcParams
 from controller.reference import ReferenceParams
+from controller.separation import SeparationParams
 from controller.tracker import TrackerParams
 
 MAX_TEAM_SIZE = 16
@@ -63,3 +64,4 @@ class ControllerParams:
     noise: NoiseParams = field(default_factory=NoiseParams)
     reference: ReferenceParams = field(default_factory=ReferenceParams)
     price: PriceParams = field(default_factory=PriceParams)
+    separation: SeparationParams = field(default_factory=SeparationParams)

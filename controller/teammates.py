@@ -227,7 +227,8 @@ class TeammateTable:
             + radii
             + params.teammate_speed_mps * age
         )
-        mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max)
+        ages = np.maximum(now_s - self._stamps[rows], 0.0)
+        mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max, 0, ages)
         if not extra:
             return mates
         more = teammate_paths(
@@ -245,4 +246,5 @@ class TeammateTable:
             np.concatenate([mates.in_formation, more.in_formation]),
             np.concatenate([d_max, more.d_max_m]),
             more.rejected,
+            np.concatenate([ages, more.ages]),
         )

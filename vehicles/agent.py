@@ -100,7 +100,8 @@ class AgentInputs:
 class AgentCounters:
     """Cumulative counts: detections fused from the own camera and from teammates, plans received,
     messages rejected (malformed, own echoes, camera detections without a converter), controller exceptions
-    caught, braking ticks, ticks that used the roster slot. The camera converter keeps its own counts
+    caught, braking ticks, escape ticks (separation rows that could not all hold: controller/separation.py),
+    ticks that used the roster slot. The camera converter keeps its own counts
     (`AgentOutputs.camera`)."""
 
     own_detections_fused: int = 0
@@ -109,6 +110,7 @@ class AgentCounters:
     rejected_messages: int = 0
     controller_errors: int = 0
     braking_ticks: int = 0
+    escape_ticks: int = 0
     slot_ticks: int = 0
 
 
@@ -323,6 +325,9 @@ class Agent:
         fault = None
         if control.status == SolveStatus.BRAKING:
             counts["braking_ticks"] += 1
+            fault = control.fault
+        elif control.status == SolveStatus.ESCAPE:
+            counts["escape_ticks"] += 1
             fault = control.fault
         setpoint = Setpoint(
             stamp_s=now_s,

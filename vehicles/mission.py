@@ -59,13 +59,15 @@ __all__ = [
 @dataclass(frozen=True)
 class MissionCounters:
     """Rejected inputs, summed over the team: operator actions refused; detections the trackers ignored
-    (gated, stale, invalid); malformed or misaddressed messages; controller exceptions; braking ticks."""
+    (gated, stale, invalid); malformed or misaddressed messages; controller exceptions; braking ticks; escape
+    ticks (separation rows that could not all hold)."""
 
     rejected_actions: int = 0
     rejected_detections: int = 0
     rejected_messages: int = 0
     controller_errors: int = 0
     braking_ticks: int = 0
+    escape_ticks: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +89,7 @@ class MissionSnapshot:
 def team_counters(vehicles: Sequence[VehicleSnapshot], *, rejected_actions: int) -> MissionCounters:
     """The team's rejected-input counters summed over its vehicles' snapshots."""
     totals = dict.fromkeys(
-        ("rejected_detections", "rejected_messages", "controller_errors", "braking_ticks"), 0
+        ("rejected_detections", "rejected_messages", "controller_errors", "braking_ticks", "escape_ticks"), 0
     )
     for v in vehicles:
         tracker, counters = v.tracker, v.counters
@@ -97,6 +99,7 @@ def team_counters(vehicles: Sequence[VehicleSnapshot], *, rejected_actions: int)
         )
         totals["controller_errors"] += counters.controller_errors
         totals["braking_ticks"] += counters.braking_ticks
+        totals["escape_ticks"] += counters.escape_ticks
     return MissionCounters(rejected_actions=rejected_actions, **totals)
 
 

@@ -155,6 +155,7 @@ def _extras(setup: SimSetup, errors_m: list[float | None]) -> dict[str, Any]:
             "rejected_messages": snap.counters.rejected_messages,
             "controller_errors": snap.counters.controller_errors,
             "braking_ticks": snap.counters.braking_ticks,
+            "escape_ticks": snap.counters.escape_ticks,
             "messages_sent": links.sent,
             "messages_delivered": links.delivered,
             "messages_dropped": links.dropped,

@@ -12,6 +12,7 @@ controller against a realistic vehicle rather than against its own predictions. 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 
@@ -19,7 +20,7 @@ import numpy as np
 import pytest
 
 from controller.formation import FormationController
-from controller.messages import PersonEstimate, SolveStatus, VehicleState
+from controller.messages import Obstacle, PersonEstimate, SolveStatus, VehicleState
 from controller.params import ControllerParams, FormationParams
 
 pytestmark = pytest.mark.slow  # closed-loop flights of up to 16 MAVs: minutes in all
@@ -91,39 +92,51 @@ def simulate(
     rate_hz: float = 10.0,
     share_plans: bool = True,
     slots: bool = False,
+    start_m: np.ndarray | None = None,
+    bearings_rad: Sequence[float] | None = None,
+    obstacles: Sequence[Obstacle] = (),
+    params: ControllerParams = ControllerParams(),
+    plan_delay_s: Sequence[float] | None = None,
 ) -> Run:
     """Fly K controllers and their vehicles; person(t) -> ((3,) position, (3,) velocity) is the estimate fed
-    to every MAV. slots: give MAV k the roster bearing 2 pi k / K (the no-communication mode)."""
+    to every MAV. slots: give MAV k the roster bearing 2 pi k / K (the no-communication mode); bearings_rad:
+    give MAV k this bearing instead; start_m (K, 3): where they start (default `clustered_start`);
+    plan_delay_s (K,): MAV k's plans reach its teammates this much later than the plan period does (a
+    stale link)."""
     period = 1.0 / rate_hz
-    ctrls = [FormationController(vehicle_id=k, params=ControllerParams()) for k in range(team_size)]
-    pos = clustered_start(team_size, person(0.0)[0])
+    ctrls = [FormationController(vehicle_id=k, params=params) for k in range(team_size)]
+    pos = clustered_start(team_size, person(0.0)[0]) if start_m is None else np.array(start_m, dtype=float)
     vel = np.zeros_like(pos)
     acc = np.zeros_like(pos)
-    published: list = [None] * team_size
+    delays = np.zeros(team_size) if plan_delay_s is None else np.asarray(plan_delay_s, dtype=float)
+    history: list[list] = []  # every publication: (time, plans)
     last_publish = -np.inf
     times, positions, people, statuses = [], [], [], []
     for tick in range(int(round(duration_s * rate_hz))):
         now = tick * period
         p, v = person(now)
         estimate = PersonEstimate(stamp_s=now, position_m=p, velocity_mps=v, cov=np.eye(6) * 0.01)
+        published = _delivered(history, now, delays, team_size)
         outs = []
         for k, ctrl in enumerate(ctrls):
             mates = [p for j, p in enumerate(published) if j != k and p is not None] if share_plans else []
             own = VehicleState(vehicle_id=k, stamp_s=now, position_m=pos[k], velocity_mps=vel[k])
             slot = 2.0 * np.pi * k / team_size if slots else None
+            if bearings_rad is not None:
+                slot = bearings_rad[k]
             outs.append(
                 ctrl.step(
                     now_s=now,
                     own=own,
                     person=estimate,
                     teammates=mates,
-                    obstacles=(),
+                    obstacles=obstacles,
                     formation=FORMATION,
                     preferred_bearing_rad=slot,
                 )
             )
         if now - last_publish >= PLAN_PERIOD_S - 1e-9:
-            published = [out.plan for out in outs]
+            history.append([now, [out.plan for out in outs]])
             last_publish = now
         wp_p = np.array([out.waypoint_position_m for out in outs])
         wp_v = np.array([out.waypoint_velocity_mps for out in outs])
@@ -133,6 +146,21 @@ def simulate(
         people.append(person(now + period)[0])
         statuses.append([out.status.value for out in outs])
     return Run(np.array(times), np.array(positions), np.array(people), np.array(statuses))
+
+
+def _delivered(history: list[list], now_s: float, delays_s: np.ndarray, team_size: int) -> list:
+    """Each MAV's latest plan its teammates have at now_s: published one tick before now (the plan period)
+    and delayed by delays_s[k] more; None before the first one arrives."""
+    out: list = [None] * team_size
+    missing = set(range(team_size))
+    for stamp, plans in reversed(history):
+        for k in list(missing):
+            if stamp + delays_s[k] < now_s - 1e-9:
+                out[k] = plans[k]
+                missing.discard(k)
+        if not missing:
+            break
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- metrics
@@ -222,7 +250,12 @@ def test_team_around_a_standing_person_never_comes_closer_than_1_5_m(team_size):
 
 @pytest.mark.parametrize("team_size", ALL_SIZES)
 def test_team_around_a_standing_person_solves_every_tick(team_size):
-    assert np.all(standing_run(team_size).statuses == SolveStatus.SOLVED.value)
+    """Never a braking plan; escapes (the separation rows cannot all hold) only while the clustered start,
+    2 m apart, spreads out: measured up to 6.3 s (K = 16)."""
+    run = standing_run(team_size)
+    escaping = run.statuses == SolveStatus.ESCAPE.value
+    assert np.all((run.statuses == SolveStatus.SOLVED.value) | escaping)
+    assert not escaping[run.times_s > 10.0].any()
 
 
 @pytest.mark.parametrize("team_size", WALKING_SIZES)

@@ -131,21 +131,32 @@ def start_positions(
     *, count: int, layout: str, d_des_m: float, person_xy_m: np.ndarray, obstacles: tuple[Obstacle, ...] = ()
 ) -> np.ndarray:
     """(count, 3) ground positions of the MAVs, d_des_m from the person, each turned along the circle in
-    2-degree steps (alternating sides, up to 40 degrees) until it keeps START_CLEARANCE_M from every trunk."""
+    2-degree steps (alternating sides, up to 180 degrees) until it keeps START_CLEARANCE_M from every trunk and
+    CLUSTER_SPACING_M from every spot already placed (a crew does not set two MAVs down side by side to
+    dodge a tree; the separation guarantee starts on the ground); where no spot keeps both, the one that
+    misses them by the least."""
     if layout == "ring":
         bearings = [2.0 * math.pi * k / count for k in range(count)]
     else:
         step = CLUSTER_SPACING_M / d_des_m
         bearings = [-math.pi / 2.0 + (k - (count - 1) / 2.0) * step for k in range(count)]
-    out = []
+    out: list[list[float]] = []
     for b in bearings:
-        xy = person_xy_m + d_des_m * np.array([math.cos(b), math.sin(b)])
-        for j in range(41):
+        best, best_score = None, -math.inf
+        for j in range(181):
             turn = math.radians(2.0 * ((j + 1) // 2) * (1 if j % 2 else -1))
             xy = person_xy_m + d_des_m * np.array([math.cos(b + turn), math.sin(b + turn)])
-            if _clearance(xy, obstacles) >= START_CLEARANCE_M:
+            apart = min((math.hypot(xy[0] - o[0], xy[1] - o[1]) for o in out), default=math.inf)
+            # what the spot lacks, as a fraction of each requirement; 0: it meets both
+            score = min(0.0, _clearance(xy, obstacles) / START_CLEARANCE_M - 1.0) + min(
+                0.0, apart / CLUSTER_SPACING_M - 1.0
+            )
+            if score > best_score:
+                best, best_score = xy, score
+            if score >= -1e-9:
                 break
-        out.append([xy[0], xy[1], 0.0])
+        assert best is not None
+        out.append([best[0], best[1], 0.0])
     return np.array(out)
 
 

@@ -1,0 +1,226 @@
+"""Separation constraints: the half-planes that keep one MAV's plan apart from its teammates' plans and
+outside the trunks, added to its MPC as linear rows (docs/safety.md).
+
+The paper's repulsive fields (eqs. 13, 15) shape the plan but promise nothing. These rows are the guarantee:
+
+- **Teammates, buffered Voronoi cells on the shared plans.** At every plan step n our previous plan's
+  position q(n) and teammate j's planned position m_j(n) define the plane through their midpoint with unit
+  normal a = (q - m) / |q - m|; our new plan must keep p(n) on our side, `separation_m / 2` plus our share
+  of what we cannot know beyond it: a . p(n) >= a . (q + m) / 2 + (separation_m + inflation_j) / 2 +
+  brake_n. inflation_j is both self-localisation covariance radii (eq. 15's r_sigma) and the plan's age
+  times the speed bound. The teammate builds the mirror row from the same two plans, so two cooperating
+  MAVs that both hold their rows stay `separation_m + inflation` apart.
+- **Braking room.** The horizon (1.5 s) is shorter than a stop from 5 m/s, so a plan may meet its rows and
+  still close in too fast to stop later. Each cooperative row carries the braking distance of our half of
+  the pair's closing speed along a: v^2 / (2 b), b = step_brake_mps2 before the last step and brake_mps2 at
+  it, capped at brake_margin_max_m.
+- **Teammates that do not cooperate** (out of formation: taking off, holding, landing; or silent longer than
+  `cooperative_age_s`): we keep the whole distance from their (aligned, possibly extrapolated) plan,
+  separation_m + inflation_j from m_j(n), and the braking room of the whole closing speed at the last step.
+- **Trunks.** A vertical plane tangent to the trunk's cylinder grown by `obstacle_clearance_m` (and our
+  covariance radius), facing our planned position, at every step where that position is below the trunk's
+  top; the disc lies wholly behind the plane, so keeping to the plane keeps clear of the disc.
+
+All rows are soft with one exact penalty (controller/mpc.py `HalfPlanes`): the QP is never infeasible, and
+whenever the rows can all hold the plan holds them exactly. When they cannot (squeezed between trunks, a
+teammate inside our cell), the controller escapes (formation.py): it brakes towards its current position
+and separates vertically from the closest teammate, and counts it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.fields import ObstacleSet, TeammatePaths
+from controller.mpc import HalfPlanes
+
+
+@dataclass(frozen=True)
+class SeparationParams:
+    """The separation constraints' distances (m), decelerations (m/s^2) and ages (s).
+
+    enabled: add the rows at all (False: the paper's fields alone, for comparison).
+    separation_m: the distance two cooperating plans keep apart at every step before inflation (both
+        covariance radii, the plans' age): above the 1.5 m the safety sweep checks by about what following a
+        plan costs, and small enough that 16 MAVs on the d_des = 8 m circle (3.12 m apart) hold their rows.
+    obstacle_clearance_m: the distance every planned position keeps from a trunk's surface.
+    step_brake_mps2, brake_mps2: the decelerations whose braking distance each cooperative row keeps (before
+        the last step, and at it); brake_margin_max_m caps that room.
+    cooperative_age_s: a teammate whose plan is older than this is not trusted to hold its own row.
+    teammate_range_m, obstacle_range_m: pairs and trunks farther than this from every step give no rows.
+    escape_violation_m: a plan that misses its rows by more than this is replaced by an escape.
+    escape_climb_m: the height difference an escape aims for from a teammate closer than separation_m.
+    """
+
+    enabled: bool = True
+    separation_m: float = 1.6
+    obstacle_clearance_m: float = 1.0
+    step_brake_mps2: float = 3.0
+    brake_mps2: float = 2.0
+    brake_margin_max_m: float = 4.0
+    cooperative_age_s: float = 0.5
+    teammate_range_m: float = 12.0
+    obstacle_range_m: float = 12.0
+    escape_violation_m: float = 0.05
+    escape_climb_m: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if name == "enabled":
+                continue
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"SeparationParams.{name} must be a finite number >= 0, got {value}")
+        if self.step_brake_mps2 <= 0.0 or self.brake_mps2 <= 0.0:
+            raise ValueError("SeparationParams: the braking decelerations must be > 0")
+
+
+@dataclass(frozen=True, eq=False)
+class SeparationRows:
+    """The rows of one tick and where they came from.
+
+    planes: the MPC's half-planes (R rows); teammate_rows, obstacle_rows: how many of each;
+    closest_teammate_m: the smallest distance between our previous plan and a teammate's plan over the
+    horizon (inf when none); closest_teammate_index: that teammate's index in the TeammatePaths (-1: none).
+    """
+
+    planes: HalfPlanes
+    teammate_rows: int
+    obstacle_rows: int
+    closest_teammate_m: float
+    closest_teammate_index: int
+
+    @property
+    def count(self) -> int:
+        return self.teammate_rows + self.obstacle_rows
+
+
+def braking_room_m(closing_mps: np.ndarray, *, decel_mps2: float, cap_m: float) -> np.ndarray:
+    """Distance to stop a closing speed (m/s, >= 0 counts; negative: moving apart) at decel_mps2, capped."""
+    v = np.maximum(closing_mps, 0.0)
+    return np.minimum(v * v / (2.0 * decel_mps2), cap_m)
+
+
+def teammate_rows(
+    *,
+    own_path_m: np.ndarray,
+    own_velocities_mps: np.ndarray,
+    mates: TeammatePaths,
+    cooperative: np.ndarray,
+    inflation_m: np.ndarray,
+    dt_s: float,
+    own_id: int,
+    params: SeparationParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Buffered Voronoi rows against every teammate at plan steps 1..S-1.
+
+    own_path_m, own_velocities_mps: (S, 3) our previous plan on this tick's horizon (S = N+1 steps, step 0
+    at the start state); mates.positions_m (J, S, 3); cooperative (J,) bool; inflation_m (J,) m.
+    Returns steps (R,), normals (R, 3), offsets (R,) and the pair distances (J, S).
+    """
+    diff = own_path_m[None, :, :] - mates.positions_m  # (J, S, 3)
+    dist = np.sqrt(np.einsum("jsi,jsi->js", diff, diff))  # (J, S)
+    tie = np.where(mates.vehicle_ids < own_id, 1.0, -1.0)  # coincident plans: split along x by id
+    fallback = np.zeros_like(diff)
+    fallback[..., 0] = tie[:, None]
+    normals = np.where(dist[..., None] > 1e-6, diff / np.maximum(dist, 1e-12)[..., None], fallback)
+    mate_v = np.gradient(mates.positions_m, dt_s, axis=1) if diff.shape[1] > 1 else np.zeros_like(diff)
+    closing = -np.einsum("jsi,jsi->js", normals, own_velocities_mps[None] - mate_v)  # (J, S) m/s
+    last = diff.shape[1] - 1
+    share = np.where(cooperative, 0.5, 1.0)[:, None]  # our part of the closing speed
+    room = braking_room_m(share * closing, decel_mps2=params.step_brake_mps2, cap_m=params.brake_margin_max_m)
+    room[:, last] = braking_room_m(
+        share[:, 0] * closing[:, last], decel_mps2=params.brake_mps2, cap_m=params.brake_margin_max_m
+    )
+    room[~cooperative, :last] = 0.0
+    gap = params.separation_m + inflation_m  # (J,) what the pair must keep
+    # a . m + |q - m| = a . q: a cooperative row keeps p on our side of the midpoint plus half the gap, any
+    # other row keeps the whole gap from the teammate's plan.
+    a_dot_m = np.einsum("jsi,jsi->js", normals, mates.positions_m)
+    offsets = a_dot_m + np.where(cooperative[:, None], 0.5 * (dist + gap[:, None]), gap[:, None]) + room
+    use = dist.min(axis=1) < params.teammate_range_m  # (J,)
+    use_rows = np.zeros_like(dist, dtype=bool)
+    use_rows[use, 1:] = True
+    j, s = np.nonzero(use_rows)
+    return s, normals[j, s], offsets[j, s], dist
+
+
+def obstacle_rows(
+    *,
+    own_path_m: np.ndarray,
+    obstacles: ObstacleSet,
+    own_cov_radius_m: float,
+    params: SeparationParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tangent planes to every trunk near our previous plan, at steps 1..S-1 below its top.
+
+    Returns steps (R,), normals (R, 3) with zero z, offsets (R,)."""
+    if obstacles.count == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+    rel = own_path_m[None, :, :2] - obstacles.centers_m[:, None, :]  # (M, S, 2)
+    dist = np.sqrt(np.einsum("msi,msi->ms", rel, rel))
+    normals_xy = np.where(
+        dist[..., None] > 1e-6, rel / np.maximum(dist, 1e-12)[..., None], np.array([1.0, 0.0])
+    )
+    grown = obstacles.radii_m + params.obstacle_clearance_m + own_cov_radius_m  # (M,)
+    offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown[:, None]
+    below = own_path_m[None, :, 2] < obstacles.heights_m[:, None] + params.obstacle_clearance_m
+    near = dist - obstacles.radii_m[:, None] < params.obstacle_range_m
+    use = below & near
+    use[:, 0] = False
+    m, s = np.nonzero(use)
+    normals = np.zeros((m.shape[0], 3))
+    normals[:, :2] = normals_xy[m, s]
+    return s, normals, offsets[m, s]
+
+
+def separation_rows(
+    *,
+    own_path_m: np.ndarray,
+    own_velocities_mps: np.ndarray,
+    mates: TeammatePaths,
+    mate_ages_s: np.ndarray,
+    inflation_m: np.ndarray,
+    obstacles: ObstacleSet,
+    own_cov_radius_m: float,
+    dt_s: float,
+    own_id: int,
+    params: SeparationParams,
+) -> SeparationRows:
+    """Every separation row of one tick (see the module docstring), as the MPC's soft `HalfPlanes`.
+
+    own_path_m, own_velocities_mps: (S, 3) our previous plan on the horizon, starting at the start state;
+    mate_ages_s (J,): each teammate plan's age; inflation_m (J,): what each row grows by (m).
+    The rows constrain plan step n = 1..S-1 (the MPC's x(n); x(0) is the measured state).
+    """
+    cooperative = mates.in_formation & (mate_ages_s <= params.cooperative_age_s)
+    if mates.count:
+        t_steps, t_normals, t_offsets, dist = teammate_rows(
+            own_path_m=own_path_m,
+            own_velocities_mps=own_velocities_mps,
+            mates=mates,
+            cooperative=cooperative,
+            inflation_m=inflation_m,
+            dt_s=dt_s,
+            own_id=own_id,
+            params=params,
+        )
+        per_mate = dist.min(axis=1)
+        closest_index = int(np.argmin(per_mate))
+        closest = float(per_mate[closest_index])
+    else:
+        t_steps, t_normals, t_offsets = np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+        closest_index, closest = -1, math.inf
+    o_steps, o_normals, o_offsets = obstacle_rows(
+        own_path_m=own_path_m, obstacles=obstacles, own_cov_radius_m=own_cov_radius_m, params=params
+    )
+    normals = np.concatenate([t_normals, o_normals])
+    planes = HalfPlanes(
+        steps=np.concatenate([t_steps, o_steps]).astype(np.int64),
+        normals_xy=normals[:, :2],
+        normals_z=normals[:, 2],
+        offsets=np.concatenate([t_offsets, o_offsets]),
+    )
+    return SeparationRows(planes, int(t_steps.shape[0]), int(o_steps.shape[0]), closest, closest_index)

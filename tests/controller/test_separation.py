@@ -1,0 +1,189 @@
+"""Specification of the separation constraints (controller/separation.py): the rows' geometry, and the
+formation controller keeping MAVs apart with them where the paper's fields alone do not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_closed_loop import STILL_PERSON, min_separation_m, simulate
+
+from controller.fields import ObstacleSet, TeammatePaths
+from controller.messages import Obstacle
+from controller.params import ControllerParams
+from controller.separation import SeparationParams, braking_room_m, obstacle_rows, separation_rows
+
+PARAMS = SeparationParams()
+DT = 0.1
+STEPS = 16
+
+
+def line(start, velocity, steps: int = STEPS) -> np.ndarray:
+    """(steps, 3) positions of a straight constant-velocity plan."""
+    return np.asarray(start, float) + DT * np.arange(steps)[:, None] * np.asarray(velocity, float)
+
+
+def mates(paths, *, in_formation=True, ages_s=0.0, ids=None) -> TeammatePaths:
+    paths = np.asarray(paths, float)
+    count = paths.shape[0]
+    return TeammatePaths(
+        positions_m=paths,
+        vehicle_ids=np.arange(1, count + 1) if ids is None else np.asarray(ids),
+        in_formation=np.full(count, in_formation),
+        d_max_m=np.full(count, 3.0),
+        ages_s=np.full(count, ages_s),
+    )
+
+
+def rows_for(own_path, own_vel, team: TeammatePaths, *, inflation=0.0, obstacles=None, own_id=0, prm=PARAMS):
+    return separation_rows(
+        own_path_m=own_path,
+        own_velocities_mps=own_vel,
+        mates=team,
+        mate_ages_s=team.ages,
+        inflation_m=np.full(team.count, inflation),
+        obstacles=obstacles or ObstacleSet.from_obstacles(()),
+        own_cov_radius_m=0.0,
+        dt_s=DT,
+        own_id=own_id,
+        params=prm,
+    )
+
+
+def margins(rows, positions: np.ndarray) -> np.ndarray:
+    """(R,) a . p(step) - b of every row for positions (S, 3): >= 0 where the row holds."""
+    planes = rows.planes
+    normals = np.column_stack([planes.normals_xy, planes.normals_z])
+    return np.einsum("ri,ri->r", normals, positions[planes.steps]) - planes.offsets
+
+
+# ------------------------------------------------------------------------------------------- the rows
+def test_two_cooperating_mavs_build_mirrored_cells_that_keep_them_the_separation_apart():
+    """A's row and B's row from the same two hovering plans: any two points that meet them are at least
+    separation_m + inflation apart along the pair's line."""
+    a_path, b_path = line([0.0, 0.0, 8.0], [0, 0, 0]), line([3.0, 0.0, 8.0], [0, 0, 0])
+    still = np.zeros((STEPS, 3))
+    rows_a = rows_for(a_path, still, mates([b_path], ids=[1]), inflation=1.0, own_id=0)
+    rows_b = rows_for(b_path, still, mates([a_path], ids=[0]), inflation=1.0, own_id=1)
+    # A must keep x <= 1.5 - 1.3 = 0.2, B x >= 1.5 + 1.3 = 2.8: 2.6 m = separation 1.6 + inflation 1.0
+    a_limit = rows_a.planes.offsets / rows_a.planes.normals_xy[:, 0]  # n x >= b: x <= b / n for n < 0
+    b_limit = rows_b.planes.offsets / rows_b.planes.normals_xy[:, 0]
+    np.testing.assert_allclose(a_limit, 0.2, atol=1e-12)
+    np.testing.assert_allclose(b_limit, 2.8, atol=1e-12)
+    assert rows_a.teammate_rows == STEPS - 1 and rows_a.planes.steps.min() == 1
+
+
+def test_a_teammate_out_of_formation_gets_the_whole_distance_not_half():
+    a_path, b_path = line([0.0, 0.0, 8.0], [0, 0, 0]), line([3.0, 0.0, 8.0], [0, 0, 0])
+    rows = rows_for(a_path, np.zeros((STEPS, 3)), mates([b_path], in_formation=False), inflation=1.0)
+    np.testing.assert_allclose(rows.planes.offsets / rows.planes.normals_xy[:, 0], 3.0 - 2.6, atol=1e-12)
+
+
+def test_a_stale_teammate_is_not_trusted_to_yield():
+    a_path, b_path = line([0.0, 0.0, 8.0], [0, 0, 0]), line([3.0, 0.0, 8.0], [0, 0, 0])
+    fresh = rows_for(a_path, np.zeros((STEPS, 3)), mates([b_path], ages_s=0.2))
+    stale = rows_for(a_path, np.zeros((STEPS, 3)), mates([b_path], ages_s=1.0))
+    np.testing.assert_allclose(fresh.planes.offsets / fresh.planes.normals_xy[:, 0], 1.5 - 0.8, atol=1e-12)
+    np.testing.assert_allclose(stale.planes.offsets / stale.planes.normals_xy[:, 0], 3.0 - 1.6, atol=1e-12)
+
+
+def test_closing_in_adds_the_braking_distance_of_our_half_of_the_closing_speed():
+    """Head-on at 4 m/s each (8 m/s closing): our half, 4 m/s, needs 4^2 / (2 * 3) = 2.67 m before the last
+    step and min(4^2 / (2 * 2), 4) = 4 m at it."""
+    a_path, b_path = line([0.0, 0.0, 8.0], [4, 0, 0]), line([20.0, 0.0, 8.0], [-4, 0, 0])
+    a_vel = np.tile([4.0, 0.0, 0.0], (STEPS, 1))
+    prm = SeparationParams(teammate_range_m=30.0)
+    moving = rows_for(a_path, a_vel, mates([b_path]), prm=prm)
+    assert moving.count == STEPS - 1
+    np.testing.assert_allclose(moving.planes.normals_xy, [[-1.0, 0.0]] * (STEPS - 1), atol=1e-12)
+    mid = 0.5 * (a_path[1:, 0] + b_path[1:, 0])
+    room = mid - 0.8 + moving.planes.offsets  # -x >= b means x <= -b = mid - 0.8 - room
+    np.testing.assert_allclose(room[:-1], 16.0 / 6.0, atol=1e-9)
+    assert room[-1] == pytest.approx(4.0, abs=1e-9)
+
+
+def test_braking_room_ignores_teammates_moving_apart_and_is_capped():
+    np.testing.assert_allclose(
+        braking_room_m(np.array([-3.0, 0.0, 3.0, 10.0]), decel_mps2=3.0, cap_m=4.0), [0.0, 0.0, 1.5, 4.0]
+    )
+
+
+def test_teammates_beyond_range_give_no_rows():
+    far = rows_for(line([0, 0, 8], [0, 0, 0]), np.zeros((STEPS, 3)), mates([line([30, 0, 8], [0, 0, 0])]))
+    assert far.teammate_rows == 0 and far.closest_teammate_m == pytest.approx(30.0)
+
+
+def test_coincident_plans_split_along_x_by_vehicle_id():
+    here = line([1.0, 1.0, 8.0], [0, 0, 0])
+    low = rows_for(here, np.zeros((STEPS, 3)), mates([here], ids=[5]), own_id=2)
+    high = rows_for(here, np.zeros((STEPS, 3)), mates([here], ids=[2]), own_id=5)
+    assert np.all(low.planes.normals_xy[:, 0] == -1.0) and np.all(high.planes.normals_xy[:, 0] == 1.0)
+
+
+def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behind_it():
+    trunk = ObstacleSet.from_obstacles(
+        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
+    )
+    path = line([0.0, 1.0, 8.0], [1.0, 0.0, 0.0])
+    steps, normals, offsets = obstacle_rows(
+        own_path_m=path, obstacles=trunk, own_cov_radius_m=0.2, params=PARAMS
+    )
+    assert steps.tolist() == list(range(1, STEPS))
+    angles = np.linspace(0.0, 2.0 * np.pi, 73)
+    disc = np.array([5.0, 0.0]) + 1.7 * np.column_stack([np.cos(angles), np.sin(angles)])  # r + 1 + 0.2
+    for n, b in zip(normals, offsets, strict=True):
+        assert np.max(disc @ n[:2] - b) <= 1e-9  # the grown disc lies behind the plane
+        assert np.max(disc @ n[:2] - b) == pytest.approx(0.0, abs=0.005)  # and touches it: tangent
+
+
+def test_no_trunk_row_above_the_trunk_top():
+    trunk = ObstacleSet.from_obstacles(
+        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=6.0),)
+    )
+    steps, _, _ = obstacle_rows(
+        own_path_m=line([0.0, 1.0, 8.0], [1, 0, 0]), obstacles=trunk, own_cov_radius_m=0.0, params=PARAMS
+    )
+    assert steps.size == 0
+
+
+def test_parameters_out_of_range_are_refused():
+    with pytest.raises(ValueError, match="separation_m"):
+        SeparationParams(separation_m=-1.0)
+    with pytest.raises(ValueError, match="decelerations"):
+        SeparationParams(step_brake_mps2=0.0)
+
+
+# ---------------------------------------------------------------------------------- closed loop (slow)
+def still_person(_t: float):
+    return STILL_PERSON, np.zeros(3)
+
+
+def on_circle(bearings_deg) -> np.ndarray:
+    b = np.radians(np.asarray(bearings_deg, float))
+    return np.column_stack(
+        [STILL_PERSON[0] + 8.0 * np.cos(b), STILL_PERSON[1] + 8.0 * np.sin(b), np.full(b.shape, 8.9)]
+    )
+
+
+def swap_run(params: ControllerParams):
+    """Two MAVs 40 degrees apart on the circle (5.5 m) told to take each other's bearing: they meet head-on."""
+    return simulate(
+        team_size=2,
+        duration_s=20.0,
+        person=still_person,
+        start_m=on_circle([70.0, 110.0]),
+        bearings_rad=np.radians([110.0, 70.0]),
+        params=params,
+    )
+
+
+@pytest.mark.slow
+def test_two_mavs_swapping_slots_head_on_keep_1_5_m():
+    run = swap_run(ControllerParams())
+    assert min_separation_m(run, horizontal=False) >= 1.5
+
+
+@pytest.mark.slow
+def test_without_separation_rows_the_head_on_swap_comes_closer():
+    """The same swap with the fields alone: what the rows are for (this test pins the scenario's difficulty)."""
+    run = swap_run(ControllerParams(separation=SeparationParams(enabled=False)))
+    assert min_separation_m(run, horizontal=False) < 1.5
