@@ -44,7 +44,6 @@ from controller.messages import (
 )
 from controller.mpc import ModelPredictiveController, MpcParams, braking_plan, predict
 from controller.params import ControllerParams, FormationParams, Method
-from controller.separation import SeparationRows, separation_rows
 from controller.reference import (
     bearing_rad,
     clip_into,
@@ -52,6 +51,7 @@ from controller.reference import (
     plan_state_at,
     terminal_reference,
 )
+from controller.separation import SeparationRows, separation_rows
 from controller.teammates import TeammateView, align_rows
 
 DEFAULT_COV_M2 = np.eye(3) * 0.25

@@ -93,9 +93,9 @@ def simulate(
     share_plans: bool = True,
     slots: bool = False,
     start_m: np.ndarray | None = None,
-    bearings_rad: Sequence[float] | None = None,
+    bearings_rad: Sequence[float] | np.ndarray | None = None,
     obstacles: Sequence[Obstacle] = (),
-    params: ControllerParams = ControllerParams(),
+    params: ControllerParams | None = None,
     plan_delay_s: Sequence[float] | None = None,
 ) -> Run:
     """Fly K controllers and their vehicles; person(t) -> ((3,) position, (3,) velocity) is the estimate fed
@@ -104,6 +104,7 @@ def simulate(
     plan_delay_s (K,): MAV k's plans reach its teammates this much later than the plan period does (a
     stale link)."""
     period = 1.0 / rate_hz
+    params = params or ControllerParams()
     ctrls = [FormationController(vehicle_id=k, params=params) for k in range(team_size)]
     pos = clustered_start(team_size, person(0.0)[0]) if start_m is None else np.array(start_m, dtype=float)
     vel = np.zeros_like(pos)

@@ -165,7 +165,8 @@ def on_circle(bearings_deg) -> np.ndarray:
 
 
 def swap_run(params: ControllerParams):
-    """Two MAVs 40 degrees apart on the circle (5.5 m) told to take each other's bearing: they meet head-on."""
+    """Two MAVs 40 degrees apart on the circle (5.5 m) told to take each other's bearing: they meet
+    head-on."""
     return simulate(
         team_size=2,
         duration_s=20.0,
@@ -184,6 +185,6 @@ def test_two_mavs_swapping_slots_head_on_keep_1_5_m():
 
 @pytest.mark.slow
 def test_without_separation_rows_the_head_on_swap_comes_closer():
-    """The same swap with the fields alone: what the rows are for (this test pins the scenario's difficulty)."""
+    """The same swap with the fields alone: what the rows are for (this pins the scenario's difficulty)."""
     run = swap_run(ControllerParams(separation=SeparationParams(enabled=False)))
     assert min_separation_m(run, horizontal=False) < 1.5

@@ -131,8 +131,8 @@ def start_positions(
     *, count: int, layout: str, d_des_m: float, person_xy_m: np.ndarray, obstacles: tuple[Obstacle, ...] = ()
 ) -> np.ndarray:
     """(count, 3) ground positions of the MAVs, d_des_m from the person, each turned along the circle in
-    2-degree steps (alternating sides, up to 180 degrees) until it keeps START_CLEARANCE_M from every trunk and
-    CLUSTER_SPACING_M from every spot already placed (a crew does not set two MAVs down side by side to
+    2-degree steps (alternating sides, up to 180 degrees) until it keeps START_CLEARANCE_M from every trunk
+    and CLUSTER_SPACING_M from every spot already placed (a crew does not set two MAVs down side by side to
     dodge a tree; the separation guarantee starts on the ground); where no spot keeps both, the one that
     misses them by the least."""
     if layout == "ring":
