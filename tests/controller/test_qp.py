@@ -209,8 +209,9 @@ def cvxpy_mpc_reference(
     if planes is not None:  # the soft half-planes with their shared slack w
         w = cp.Variable()
         constraints += [w >= 0]
-        for n, a, b in zip(planes.steps, planes.normals_xy, planes.offsets, strict=True):
-            constraints.append(a @ p[int(n), :2] + w >= b)
+        normals_z = np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
+        for n, a, a_z, b in zip(planes.steps, planes.normals_xy, normals_z, planes.offsets, strict=True):
+            constraints.append(a @ p[int(n), :2] + a_z * p[int(n), 2] + w >= b)
         cost = cost + params.half_plane_weight * w + params.half_plane_quadratic_weight * cp.square(w)
     problem = cp.Problem(cp.Minimize(cost), constraints)
     problem.solve(

@@ -188,3 +188,68 @@ def test_without_separation_rows_the_head_on_swap_comes_closer():
     """The same swap with the fields alone: what the rows are for (this pins the scenario's difficulty)."""
     run = swap_run(ControllerParams(separation=SeparationParams(enabled=False)))
     assert min_separation_m(run, horizontal=False) < 1.5
+
+
+# ------------------------------------------------------------------------- the QP with these rows (slow)
+def crossing_case(rng: np.random.Generator) -> tuple[dict, object]:
+    """A tick of a MAV flying at 1-3 teammates that fly at it or across its path, with the rows built from
+    both straight-line plans, and a target beyond them: the free plan runs into the cells."""
+    own = rng.uniform([-5.0, -5.0, 7.0], [5.0, 5.0, 9.0])
+    heading = rng.uniform(0.0, 2.0 * np.pi)
+    speed = rng.uniform(1.0, 4.0)
+    velocity = speed * np.array([np.cos(heading), np.sin(heading), 0.0])
+    paths = []
+    for _ in range(int(rng.integers(1, 4))):
+        ahead = own + velocity * rng.uniform(0.8, 1.6) + rng.normal(0.0, 1.0, 3) * np.array([1.0, 1.0, 0.2])
+        mate_v = -velocity * rng.uniform(0.0, 1.0) + rng.normal(0.0, 1.0, 3) * np.array([1.0, 1.0, 0.0])
+        paths.append(line(ahead, mate_v))
+    team = mates(paths, in_formation=True, ages_s=float(rng.uniform(0.0, 0.4)))
+    own_path, own_vel = line(own, velocity), np.tile(velocity, (STEPS, 1))
+    rows = rows_for(own_path, own_vel, team, inflation=float(rng.uniform(0.0, 1.5)))
+    case = dict(
+        position_m=own,
+        velocity_mps=velocity,
+        target_position_m=own + velocity * 2.5,
+        target_velocity_mps=velocity,
+        external_inputs_mps2=np.zeros((STEPS, 3)),
+    )
+    return case, rows.planes
+
+
+@pytest.fixture(scope="module")
+def separation_qps():
+    """60 crossing ticks solved by the exact solver and by CVXPY + OSQP (tight, polished) with the same soft
+    rows written out independently (test_qp.cvxpy_mpc_reference)."""
+    from test_qp import cvxpy_mpc_reference
+
+    from controller.mpc import ModelPredictiveController, MpcParams
+
+    rng = np.random.default_rng(20261129)
+    controller = ModelPredictiveController(MpcParams())
+    out = []
+    for _ in range(60):
+        case, planes = crossing_case(rng)
+        ours = controller.solve(**case, half_planes=planes)
+        weights = {"terminal_position_weight": 100.0 * np.eye(3), "terminal_velocity_weight": 100.0 * np.eye(3)}
+        u, p, _ = cvxpy_mpc_reference(MpcParams(), {**case, **weights}, planes)
+        out.append((ours, planes, u, p))
+    return out
+
+
+def _active(planes, positions: np.ndarray, tol: float = 1e-6) -> int:
+    normals = np.column_stack([planes.normals_xy, planes.normals_z])
+    slack = np.einsum("ri,ri->r", normals, positions[planes.steps]) - planes.offsets
+    return int(np.count_nonzero(slack <= tol))
+
+
+@pytest.mark.slow  # 60 QPs through CVXPY: about 5 s
+def test_at_least_50_separation_qps_have_active_rows(separation_qps):
+    assert sum(_active(planes, ours.positions_m) > 0 for ours, planes, _, _ in separation_qps) >= 50
+
+
+@pytest.mark.slow
+def test_separation_qps_match_cvxpy_to_1e_4(separation_qps):
+    assert all(ours.ok for ours, _, _, _ in separation_qps)
+    worst_u = max(float(np.max(np.abs(ours.inputs_mps2 - u))) for ours, _, u, _ in separation_qps)
+    worst_p = max(float(np.max(np.abs(ours.positions_m - p))) for ours, _, _, p in separation_qps)
+    assert worst_u < 1e-4 and worst_p < 1e-4

@@ -38,7 +38,8 @@ from vehicles.world import PersonModel
 START_LAYOUTS = ("ring", "cluster")
 VIRTUAL_OBSTACLE_LAYOUTS = ("none", "paper")
 START_CLEARANCE_M = 2.0  # a start spot keeps this much from any trunk surface
-CLUSTER_SPACING_M = 2.5  # neighbours on the launch arc of the "cluster" layout
+CLUSTER_SPACING_M = 2.5  # neighbours on the launch arc of the "cluster" layout, and any two start spots
+BELIEVED_SPACING_M = 2.0  # any two start spots as their GPS sees them (the station's take-off check)
 
 
 @dataclass(frozen=True)
@@ -128,28 +129,43 @@ def _clearance(xy: np.ndarray, obstacles: tuple[Obstacle, ...]) -> float:
 
 
 def start_positions(
-    *, count: int, layout: str, d_des_m: float, person_xy_m: np.ndarray, obstacles: tuple[Obstacle, ...] = ()
+    *,
+    count: int,
+    layout: str,
+    d_des_m: float,
+    person_xy_m: np.ndarray,
+    obstacles: tuple[Obstacle, ...] = (),
+    gps_offsets_m: np.ndarray | None = None,
 ) -> np.ndarray:
     """(count, 3) ground positions of the MAVs, d_des_m from the person, each turned along the circle in
     2-degree steps (alternating sides, up to 180 degrees) until it keeps START_CLEARANCE_M from every trunk
     and CLUSTER_SPACING_M from every spot already placed (a crew does not set two MAVs down side by side to
-    dodge a tree; the separation guarantee starts on the ground); where no spot keeps both, the one that
-    misses them by the least."""
+    dodge a tree; the separation guarantee starts on the ground), and BELIEVED_SPACING_M as their GPS sees
+    them (gps_offsets_m (count, 3): each MAV's self-localisation offset at power-on; the crew moves a MAV
+    the station's take-off check refuses); where no spot keeps all, the one that misses them by the least."""
     if layout == "ring":
         bearings = [2.0 * math.pi * k / count for k in range(count)]
     else:
         step = CLUSTER_SPACING_M / d_des_m
         bearings = [-math.pi / 2.0 + (k - (count - 1) / 2.0) * step for k in range(count)]
+    offsets = np.zeros((count, 2)) if gps_offsets_m is None else np.asarray(gps_offsets_m, float)[:, :2]
     out: list[list[float]] = []
-    for b in bearings:
+    for k, b in enumerate(bearings):
         best, best_score = None, -math.inf
         for j in range(181):
             turn = math.radians(2.0 * ((j + 1) // 2) * (1 if j % 2 else -1))
             xy = person_xy_m + d_des_m * np.array([math.cos(b + turn), math.sin(b + turn)])
             apart = min((math.hypot(xy[0] - o[0], xy[1] - o[1]) for o in out), default=math.inf)
-            # what the spot lacks, as a fraction of each requirement; 0: it meets both
-            score = min(0.0, _clearance(xy, obstacles) / START_CLEARANCE_M - 1.0) + min(
-                0.0, apart / CLUSTER_SPACING_M - 1.0
+            seen = xy + offsets[k]
+            seen_apart = min(
+                (math.hypot(*(seen - np.asarray(o[:2]) - offsets[j])) for j, o in enumerate(out)),
+                default=math.inf,
+            )
+            # what the spot lacks, as a fraction of each requirement; 0: it meets all three
+            score = (
+                min(0.0, _clearance(xy, obstacles) / START_CLEARANCE_M - 1.0)
+                + min(0.0, apart / CLUSTER_SPACING_M - 1.0)
+                + min(0.0, seen_apart / BELIEVED_SPACING_M - 1.0)
             )
             if score > best_score:
                 best, best_score = xy, score
@@ -250,27 +266,28 @@ def build_sim(
     virtual = paper_virtual_obstacles() if scenario.virtual_obstacles == "paper" else ()
     # Paper trees stand first and the starts avoid them; random trees are placed round the starts.
     fixed = paper_trees() if spec.kind == "paper" else ()
+    drift_params = DriftParams(enabled=scenario.gps_drift)
+    vehicle_rngs = streams.vehicle_rngs(scenario.vehicles)
+    drifts = [GpsDrift(drift_rng, drift_params) for drift_rng, _ in vehicle_rngs]
     starts = start_positions(
         count=scenario.vehicles,
         layout=scenario.start,
         d_des_m=scenario.formation.d_des_m,
         person_xy_m=person_xy,
         obstacles=fixed + virtual,
+        gps_offsets_m=np.array([d.offset_m for d in drifts]),
     )
     trees = make_trees(spec, streams, person=person, starts_xy_m=list(starts))
     ids = list(range(1, scenario.vehicles + 1))
     autopilots, rngs = [], {}
-    drift_params = DriftParams(enabled=scenario.gps_drift)
-    for vid, start, (drift_rng, detector_rng) in zip(
-        ids, starts, streams.vehicle_rngs(scenario.vehicles), strict=True
-    ):
+    for vid, start, drift, (_, detector_rng) in zip(ids, starts, drifts, vehicle_rngs, strict=True):
         to_person = person_xy - start[:2]
         autopilots.append(
             SimAutopilot(
                 vehicle_id=vid,
                 start_position_m=start,
                 start_yaw_rad=math.atan2(to_person[1], to_person[0]),
-                drift=GpsDrift(drift_rng, drift_params),
+                drift=drift,
                 params=airframe or AirframeParams(),
             )
         )
