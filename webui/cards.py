@@ -188,11 +188,23 @@ def agent_line(vehicle: VehicleView) -> str:
     return " · ".join(parts)
 
 
+def separation_line(vehicle: VehicleView) -> str:
+    """How close the MAV is to its nearest airborne teammate (and which) and to the nearest trunk or obstacle
+    surface, e.g. "sep 3.2 m (MAV 2) / tree 4.1 m"; "-" where not applicable (on the ground, alone, none)."""
+    v = vehicle
+    mate = f" (MAV {v.nearest_teammate_id})" if v.nearest_teammate_id is not None else ""
+    teammate, tree = (
+        "-" if d is None or not math.isfinite(d) else f"{d:.1f} m"
+        for d in (v.nearest_teammate_m, v.nearest_obstacle_m)
+    )
+    return f"sep {teammate}{mate} / tree {tree}"
+
+
 def vehicle_detail_markdown(vehicle: VehicleView, alerts: Iterable[Alert]) -> str:
     """Everything about one MAV, for the detail under the team table: phase (in formation or not), the
-    autopilot's own mode, pose, battery, link, solver; then, when there is one, the autopilot's failsafe and
-    why, why it refused to arm, why the ground station would not let it take off where it stands, and its
-    onboard agent's link, clock and last command when it runs on the vehicle."""
+    autopilot's own mode, pose, battery, link, solver, separation to teammates and trees; then, when there is
+    one, the autopilot's failsafe and why, why it refused to arm, why the ground station would not let it take
+    off where it stands, and its onboard agent's link, clock and last command when it runs on the vehicle."""
     v = vehicle
     p, vel = v.position_m, v.velocity_mps
     status = vehicle_status(v, alerts)
@@ -207,6 +219,7 @@ def vehicle_detail_markdown(vehicle: VehicleView, alerts: Iterable[Alert]) -> st
         + (f" **{STALE_FLAG}**" if v.link_stale else ""),
         f"solver {v.solve_status or '-'} {_num(v.solver_time_s, '.2f', scale=1e3)} ms · plan age "
         f"{_num(v.plan_age_s, '.1f')} s",
+        separation_line(v),
     ]
     if v.failsafe:
         lines.append(f"**{FAILSAFE_FLAG}**: {v.failsafe_reason or 'the autopilot runs its failsafe'}")

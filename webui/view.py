@@ -78,6 +78,12 @@ class VehicleView:
     words for the last arming or take-off it refused; takeoff_check: why the ground station would not let
     this vehicle take off or join the formation where it stands now (inside the person's keep-out, or within
     d_min of a teammate), None when it may.
+
+    Separation, from the positions the station knows (the autopilots' own, GPS drift included), for the
+    operator's alerts: nearest_teammate_m the 3-D distance to the closest other airborne MAV and
+    nearest_teammate_id its id; nearest_obstacle_m the horizontal distance to the nearest trunk or virtual
+    obstacle surface it is below the top of (negative inside). None when not applicable: on the ground, alone
+    in the air, no obstacle beside it.
     """
 
     vehicle_id: int
@@ -106,6 +112,9 @@ class VehicleView:
     distance_to_person_m: float | None = None
     released: bool = False
     fault: str = ""
+    nearest_teammate_m: float | None = None
+    nearest_teammate_id: int | None = None
+    nearest_obstacle_m: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position_m", frozen_array(self.position_m, (3,), "position_m"))

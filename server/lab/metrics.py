@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from controller.messages import Obstacle
+from server.separation import obstacle_clearance_m
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,19 +147,6 @@ def min_pair_distance_m(points_m: np.ndarray) -> float:
     diff = points_m[:, None, :] - points_m[None, :, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
     return float(np.min(dist[np.triu_indices(len(points_m), 1)]))
-
-
-def obstacle_clearance_m(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> float:
-    """Smallest horizontal distance of points (K, 3) to the surface of a vertical cylinder they are below the
-    top of (negative inside one); inf without obstacles."""
-    if not obstacles or len(points_m) == 0:
-        return math.inf
-    centers = np.array([o.center_m for o in obstacles])
-    radii = np.array([o.radius_m for o in obstacles])
-    tops = np.array([o.height_m for o in obstacles])
-    d = np.hypot(points_m[:, None, 0] - centers[None, :, 0], points_m[:, None, 1] - centers[None, :, 1])
-    clearance = np.where(points_m[:, None, 2] < tops[None, :], d - radii[None, :], np.inf)
-    return float(np.min(clearance))
 
 
 def tracking_error_by_vehicle_m(samples: Sequence[TickSample]) -> list[float | None]:

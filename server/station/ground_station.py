@@ -32,6 +32,7 @@ import numpy as np
 from controller.messages import Obstacle
 from server.flightlog.log import FlightLog, utc_now_iso
 from server.flightlog.records import AuditRecord, scalar
+from server.separation import Separation, separations
 from server.station.alert_rules import AlertParams, conditions
 from server.station.alerts import AlertBook, UnknownAlertError
 from server.station.commands import (
@@ -631,11 +632,14 @@ def vehicle_view(
     now_s: float | None = None,
     person_m: np.ndarray | None = None,
     takeoff_check: str | None = None,
+    separation: Separation | None = None,
 ) -> VehicleView:
     """One vehicle as the operator sees it (the autopilot's reported pose; stale when telemetry is old), with
     what its autopilot says of itself and why it may not take off where it stands (`takeoff_check`).
     now_s: mission time of the view, for the plan's age (None: not known); person_m (3,): where the person is
-    believed to be, for the distance to the person."""
+    believed to be, for the distance to the person; separation: its distances to the nearest teammate and
+    obstacle (`team_separations`; None: not known)."""
+    separation = separation or Separation()
     s = v.autopilot
     age = v.link_age_s if v.link_age_s is not None else math.inf
     plan = v.plan.positions_m if v.plan is not None else np.zeros((0, 3))
@@ -671,6 +675,20 @@ def vehicle_view(
         arming_refusal=s.arming_refusal if s is not None else None,
         takeoff_check=takeoff_check,
         agent=agent_view(v.agent) if v.agent is not None else None,
+        nearest_teammate_m=separation.nearest_teammate_m,
+        nearest_teammate_id=separation.nearest_teammate_id,
+        nearest_obstacle_m=separation.nearest_obstacle_m,
+    )
+
+
+def team_separations(snap: MissionSnapshot) -> dict[int, Separation]:
+    """Every vehicle's separation to its nearest airborne teammate and nearest trunk or virtual obstacle, by
+    the positions the station knows (its autopilot's telemetry); in the air means the autopilot says so."""
+    airborne = [v.vehicle_id for v in snap.vehicles if v.autopilot is not None and v.autopilot.in_air]
+    return separations(
+        positions_m=_positions(snap),
+        airborne_ids=airborne,
+        obstacles=[o for o in snap.obstacles if o.kind != "vehicle"],
     )
 
 
@@ -708,8 +726,9 @@ def scene_view(
 
     The drawn estimate is the tracker replica with the smallest position-covariance trace (the best-informed
     MAV); the tracking error is the mean over MAVs with an estimate of |estimate - truth| (simulation only);
-    each MAV's distance to the person is measured to the drawn estimate (to the truth before there is one).
-    The rest is passed through (see `SceneView`).
+    each MAV's distance to the person is measured to the drawn estimate (to the truth before there is one);
+    its separation to teammates and obstacles by `team_separations`. The rest is passed through (see
+    `SceneView`).
     """
     estimates = [
         (v.person.position_cov_trace_m2, v.vehicle_id, v.person)
@@ -725,6 +744,7 @@ def scene_view(
     d_range, h_range = limits.d_des_range_m(max(team, 1)), limits.h_des_range_m()
     person = best[2].position_m if best else truth
     checks = takeoff_checks(snap, limits=limits)
+    separation = team_separations(snap)
     vehicles = tuple(
         vehicle_view(
             v,
@@ -732,6 +752,7 @@ def scene_view(
             now_s=snap.stamp_s,
             person_m=person,
             takeoff_check=checks.get(v.vehicle_id),
+            separation=separation.get(v.vehicle_id),
         )
         for v in snap.vehicles
     )

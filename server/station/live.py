@@ -2,14 +2,15 @@
 operator page beside them.
 
 `LiveRunner` advances the station `speed` simulated seconds per wall second in short batches; when the CPU
-cannot keep up it re-anchors instead of spiralling and counts it; `LiveRunner.pace` tells how it keeps up
-(the real-time factor over the last `PACE_WINDOW_S` of wall time), which every frame hands the station for
-the operator's header and the "behind real time" alert. `serve_station` runs it on a thread of its
-own with its own event loop and clock (`ControlThread`), so neither request bodies nor WebSocket clients on
-the web's event loop can delay a control tick; viser, uvicorn and the frame publisher share the web's loop.
-It serves until stopped (SIGINT/SIGTERM or an event), then lands every MAV and closes the back-ends in a
-`finally`, whatever stopped it. (With `--agents zenoh|spawn` the control loops are in the agents' own
-processes and the station's tick only gathers their state.)
+cannot keep up it re-anchors instead of spiralling and counts it, so simulated time as a whole slows down
+(each tick is control and physics together: docs/architecture.md#pacing-physics-and-control-in-lockstep);
+`LiveRunner.pace` tells how it keeps up (the real-time factor over the last `PACE_WINDOW_S` of wall time),
+which every frame hands the station for the operator's header and the "behind real time" alert.
+`serve_station` runs it on a thread of its own with its own event loop and clock (`ControlThread`), so neither
+request bodies nor WebSocket clients on the web's event loop can delay a control tick; viser, uvicorn and the
+frame publisher share the web's loop. It serves until stopped (SIGINT/SIGTERM or an event), then lands every
+MAV and closes the back-ends in a `finally`, whatever stopped it. (With `--agents zenoh|spawn` the control
+loops are in the agents' own processes and the station's tick only gathers their state.)
 """
 
 from __future__ import annotations

@@ -141,6 +141,12 @@ def test_the_detail_lists_position_velocity_battery_link_solver_failsafe_and_ale
     assert "- critical: MAV 3 battery low" in text
 
 
+def test_the_detail_shows_the_separation_to_the_nearest_teammate_and_tree():
+    v = mav(3, nearest_teammate_m=3.21, nearest_teammate_id=2, nearest_obstacle_m=4.06)
+    assert "sep 3.2 m (MAV 2) / tree 4.1 m" in vehicle_detail_markdown(v, [])
+    assert "sep - / tree -" in vehicle_detail_markdown(mav(3, in_air=False), [])
+
+
 def test_the_detail_and_the_table_show_the_autopilots_own_mode_and_its_failsafe_with_its_reason():
     v = mav(2, autopilot_mode="LAND", failsafe=True, failsafe_reason="Failsafe activated: switching to Land")
     text = vehicle_detail_markdown(v, [])
