@@ -53,6 +53,9 @@ class SeparationParams:
     teammate_range_m, obstacle_range_m: pairs and trunks farther than this from every step give no rows.
     escape_violation_m: a plan that misses its rows by more than this is replaced by an escape.
     escape_climb_m: the height difference an escape aims for from a teammate closer than separation_m.
+    obstacle_row_weight: a trunk row is this many times a teammate row (its normal and offset scaled): all
+        rows share the QP's one slack, the largest weighted violation, so when rows cannot all hold the plan
+        gives way to a teammate (who also moves away) before a trunk (which does not).
     """
 
     enabled: bool = True
@@ -66,6 +69,7 @@ class SeparationParams:
     obstacle_range_m: float = 12.0
     escape_violation_m: float = 0.05
     escape_climb_m: float = 2.0
+    obstacle_row_weight: float = 5.0
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
@@ -73,6 +77,8 @@ class SeparationParams:
                 continue
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"SeparationParams.{name} must be a finite number >= 0, got {value}")
+        if self.obstacle_row_weight <= 0.0:
+            raise ValueError("SeparationParams.obstacle_row_weight must be > 0")
         if self.step_brake_mps2 <= 0.0 or self.brake_mps2 <= 0.0:
             raise ValueError("SeparationParams: the braking decelerations must be > 0")
 
@@ -156,7 +162,7 @@ def obstacle_rows(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Tangent planes to every trunk near our previous plan, at steps 1..S-1 below its top.
 
-    Returns steps (R,), normals (R, 3) with zero z, offsets (R,)."""
+    Returns steps (R,), normals (R, 3) with zero z, offsets (R,), both scaled by obstacle_row_weight."""
     if obstacles.count == 0:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
     rel = own_path_m[None, :, :2] - obstacles.centers_m[:, None, :]  # (M, S, 2)
@@ -173,7 +179,8 @@ def obstacle_rows(
     m, s = np.nonzero(use)
     normals = np.zeros((m.shape[0], 3))
     normals[:, :2] = normals_xy[m, s]
-    return s, normals, offsets[m, s]
+    w = params.obstacle_row_weight
+    return s, w * normals, w * offsets[m, s]
 
 
 def separation_rows(

@@ -124,8 +124,9 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
         (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
     )
     path = line([0.0, 1.0, 8.0], [1.0, 0.0, 0.0])
+    unweighted = SeparationParams(obstacle_row_weight=1.0)
     steps, normals, offsets = obstacle_rows(
-        own_path_m=path, obstacles=trunk, own_cov_radius_m=0.2, params=PARAMS
+        own_path_m=path, obstacles=trunk, own_cov_radius_m=0.2, params=unweighted
     )
     assert steps.tolist() == list(range(1, STEPS))
     angles = np.linspace(0.0, 2.0 * np.pi, 73)
@@ -133,6 +134,17 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
     for n, b in zip(normals, offsets, strict=True):
         assert np.max(disc @ n[:2] - b) <= 1e-9  # the grown disc lies behind the plane
         assert np.max(disc @ n[:2] - b) == pytest.approx(0.0, abs=0.005)  # and touches it: tangent
+
+
+def test_a_trunk_row_weighs_more_than_a_teammate_row():
+    """Scaled by obstacle_row_weight: of the rows' shared slack a trunk row gets a fifth of a teammate's."""
+    trunk = ObstacleSet.from_obstacles(
+        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
+    )
+    path = line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0])
+    _, normals, offsets = obstacle_rows(own_path_m=path, obstacles=trunk, own_cov_radius_m=0.0, params=PARAMS)
+    np.testing.assert_allclose(normals[:, 0], -5.0)
+    np.testing.assert_allclose(offsets, -5.0 * (5.0 - 1.5))
 
 
 def test_no_trunk_row_above_the_trunk_top():
@@ -230,7 +242,10 @@ def separation_qps():
     for _ in range(60):
         case, planes = crossing_case(rng)
         ours = controller.solve(**case, half_planes=planes)
-        weights = {"terminal_position_weight": 100.0 * np.eye(3), "terminal_velocity_weight": 100.0 * np.eye(3)}
+        weights = {
+            "terminal_position_weight": 100.0 * np.eye(3),
+            "terminal_velocity_weight": 100.0 * np.eye(3),
+        }
         u, p, _ = cvxpy_mpc_reference(MpcParams(), {**case, **weights}, planes)
         out.append((ours, planes, u, p))
     return out
