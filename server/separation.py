@@ -28,18 +28,36 @@ class Separation:
     nearest_obstacle_m: float | None = None
 
 
+def _clearances_m(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> np.ndarray:
+    """(K, M) horizontal distance of each of points (K, 3) to each cylinder's surface (negative inside),
+    inf where the point is not below the cylinder's top."""
+    centers = np.array([o.center_m for o in obstacles])
+    radii = np.array([o.radius_m for o in obstacles])
+    tops = np.array([o.height_m for o in obstacles])
+    d = np.hypot(points_m[:, None, 0] - centers[None, :, 0], points_m[:, None, 1] - centers[None, :, 1])
+    return np.where(points_m[:, None, 2] < tops[None, :], d - radii[None, :], np.inf)
+
+
 def obstacle_clearances_m(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> np.ndarray:
     """(K,) horizontal distance of each of points (K, 3) to the nearest surface of a vertical cylinder it is
     below the top of (negative inside one); inf where there is none."""
     points_m = np.asarray(points_m, dtype=float).reshape(-1, 3)
     if not obstacles or len(points_m) == 0:
         return np.full(len(points_m), math.inf)
-    centers = np.array([o.center_m for o in obstacles])
-    radii = np.array([o.radius_m for o in obstacles])
-    tops = np.array([o.height_m for o in obstacles])
-    d = np.hypot(points_m[:, None, 0] - centers[None, :, 0], points_m[:, None, 1] - centers[None, :, 1])
-    clearance = np.where(points_m[:, None, 2] < tops[None, :], d - radii[None, :], np.inf)
-    return np.min(clearance, axis=1)
+    return np.min(_clearances_m(points_m, obstacles), axis=1)
+
+
+def closest_obstacle(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> tuple[float, int, int]:
+    """(clearance, point, obstacle) of the smallest clearance of points (K, 3) to the obstacles (as
+    `obstacle_clearances_m`); (inf, -1, -1) if none counts."""
+    points_m = np.asarray(points_m, dtype=float).reshape(-1, 3)
+    if not obstacles or len(points_m) == 0:
+        return math.inf, -1, -1
+    clearance = _clearances_m(points_m, obstacles)
+    i, j = np.unravel_index(int(np.argmin(clearance)), clearance.shape)
+    if not math.isfinite(clearance[i, j]):
+        return math.inf, -1, -1
+    return float(clearance[i, j]), int(i), int(j)
 
 
 def obstacle_clearance_m(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> float:

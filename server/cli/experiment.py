@@ -1,7 +1,9 @@
-"""`skyring experiment`: rerun the paper's simulation experiments; write report.md with tables and figures."""
+"""`skyring experiment`: rerun the paper's simulation experiments, or the safety sweep; write report.md with
+tables and figures."""
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -22,18 +24,20 @@ from rich.progress import (
 )
 
 from server.lab import experiments as exp
-from server.lab import figures
+from server.lab import figures, safety_report
 from server.lab import report as rep
+from server.lab import safety_sweep as sweep
 
 
 class Experiment(StrEnum):
-    """What `skyring experiment` can run: one of the paper's studies, or all of them."""
+    """What `skyring experiment` can run: one of the paper's studies, all of them, or the safety sweep."""
 
     METHODS = "methods"
     SCALABILITY = "scalability"
     COMMLOSS = "commloss"
     OBSTACLES = "obstacles"
     ALL = "all"
+    SAFETY = "safety"
 
 
 class RunProgress:
@@ -114,10 +118,11 @@ def _command_text(
 def experiment(
     family: Annotated[Experiment, typer.Argument(help="which study to run", show_default=False)],
     runs: Annotated[
-        int | None, typer.Option(min=1, help="runs per condition (default: the paper's protocol)")
+        int | None,
+        typer.Option(min=1, help="runs per condition (default: the paper's protocol); safety: runs (1000)"),
     ] = None,
     duration: Annotated[
-        float | None, typer.Option(min=0.1, help="seconds per run (default: the paper's)")
+        float | None, typer.Option(min=0.1, help="seconds per run (default: the paper's; safety: 90)")
     ] = None,
     rate: Annotated[
         float | None,
@@ -131,9 +136,13 @@ def experiment(
     jobs: Annotated[
         int | None, typer.Option(min=1, help="parallel worker processes (default: CPU count)")
     ] = None,
-    out: Annotated[Path, typer.Option(help="output directory: runs' JSON, figures/, report.md")] = Path(
-        "experiments"
-    ),
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            help="output directory: runs' JSON, figures/, report.md (default experiments; safety: "
+            "experiments/safety, with safety.json)"
+        ),
+    ] = None,
     quick: Annotated[
         bool, typer.Option("--quick", help="small CI profile: sweep end points, few short runs at 10 Hz")
     ] = False,
@@ -146,11 +155,45 @@ def experiment(
             "default: local processes"
         ),
     ] = None,
+    methods: Annotated[
+        str | None,
+        typer.Option(help="safety only: comma-separated methods to cycle through (active, dqmpc, price)"),
+    ] = None,
+    first: Annotated[
+        int | None, typer.Option(min=0, help="safety only: index of the first run (fly a slice of the sweep)")
+    ] = None,
 ) -> None:
-    """Rerun the paper's simulation experiments (SE1-SE4, 3..16 MAVs, link loss, obstacles), write a report.
+    """Rerun the paper's simulation experiments (SE1-SE4, 3..16 MAVs, link loss, obstacles), write a report;
+    or, with `safety`, the safety sweep.
 
     Each run is its own process with a seed derived from --seed; its JSON goes under --out/<family>/.
+    `safety` flies seeded runs (default 1000 of 90 s at 10 Hz) over team size 3-16, trees, link loss,
+    person and method, half of them from clustered starts, and writes safety.json and report.md with the
+    distribution of each run's closest true pair, closest believed pair, trunk clearance and closest
+    approach to the person over the whole flight. Violations (believed pair < 1.5 m, true pair < 1.0 m,
+    trunk contact) are counted and listed with the `skyring sim` command that reproduces each, but do not
+    change the exit status: like every experiment, it exits 1 only if a run failed.
     """
+    if family == Experiment.SAFETY:
+        if quick:
+            raise typer.BadParameter("--quick is for the paper's families", param_hint="--quick")
+        safety(
+            runs=runs,
+            duration=duration,
+            rate=rate,
+            seed=seed,
+            jobs=jobs,
+            out=out or Path("experiments") / "safety",
+            resume=resume,
+            cluster=cluster,
+            methods=methods,
+            first=first,
+        )
+        return
+    for name, value in (("--methods", methods), ("--first", first)):
+        if value is not None:
+            raise typer.BadParameter("only for the safety sweep", param_hint=name)
+    out = out or Path("experiments")
     try:
         families = exp.select_families(family.value)
         overrides = exp.ProfileOverrides(runs=runs, duration_s=duration, rate_hz=rate)
@@ -208,6 +251,106 @@ def experiment(
         f"{report_path}: {len(results) - failed}/{len(results)} runs ok, {agreed}/{len(claims)} of the "
         f"paper's claims agree, wall time {wall:.1f} s"
     )
+    if failed:
+        typer.echo(f"error: {failed} run(s) failed; see the list in {report_path}", err=True)
+        raise typer.Exit(code=1)
+
+
+def _run_specs(
+    specs: list[exp.RunSpec], *, jobs: int, out: Path, resume: bool, cluster: str | None
+) -> list[exp.RunResult]:
+    """The runs through the experiments' runner with progress; exit 2 on an unreachable cluster, 130 on
+    Ctrl-C."""
+    try:
+        with RunProgress(total=len(specs), stream=sys.stderr) as progress:
+            return exp.run_all(
+                specs, jobs=jobs, out_dir=out, resume=resume, progress=progress, cluster=cluster
+            )
+    except ValueError as err:  # e.g. no scheduler at the cluster address
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(code=2) from None
+    except KeyboardInterrupt:
+        typer.echo(
+            f"\ninterrupted: the finished runs are kept under {out}; add --resume to continue", err=True
+        )
+        raise typer.Exit(code=130) from None
+
+
+def _safety_command(
+    *, runs: int, first: int, duration: float, rate: float, seed: int, methods: tuple[str, ...]
+) -> str:
+    """The sweep's command as far as it decides the results."""
+    return (
+        f"skyring experiment safety --runs {runs} --first {first} --duration {duration:g} --rate {rate:g} "
+        f"--seed {seed} --methods {','.join(methods)}"
+    )
+
+
+def safety(
+    *,
+    runs: int | None,
+    duration: float | None,
+    rate: float | None,
+    seed: int,
+    jobs: int | None,
+    out: Path,
+    resume: bool,
+    cluster: str | None,
+    methods: str | None,
+    first: int | None,
+) -> None:
+    """`skyring experiment safety`: plan the sweep, fly it, write safety.json, report.md and the figure."""
+    chosen = tuple(m.strip().lower() for m in (methods or "active").split(",") if m.strip())
+    n, start = runs or sweep.DEFAULT_RUNS, first or 0
+    length, hz = duration or sweep.DEFAULT_DURATION_S, rate or sweep.DEFAULT_RATE_HZ
+    try:
+        plan = sweep.plan_sweep(
+            base_seed=seed, runs=n, first=start, methods=chosen, duration_s=length, rate_hz=hz
+        )
+        specs = [r.spec() for r in plan]
+        exp.check_configs(specs)
+    except ValueError as err:
+        raise typer.BadParameter(str(err)) from err
+    jobs = jobs or os.cpu_count() or 1
+    out.mkdir(parents=True, exist_ok=True)
+    where = f"the Dask cluster at {cluster}" if cluster else f"{jobs} processes"
+    typer.echo(f"{n} safety runs ({n * length:.0f} simulated seconds) on {where} -> {out}", err=True)
+    began = time.monotonic()
+    results = _run_specs(specs, jobs=jobs, out=out, resume=resume, cluster=cluster)
+    wall = time.monotonic() - began
+
+    outcomes = [sweep.outcome(r, res) for r, res in zip(plan, results, strict=True)]
+    thresholds = sweep.Thresholds()
+    command = _safety_command(runs=n, first=start, duration=length, rate=hz, seed=seed, methods=chosen)
+    panels = [
+        (
+            [m.distance_m for o in outcomes if (m := getattr(o, attr)).distance_m is not None],
+            label,
+            getattr(thresholds, limit) if limit else None,
+        )
+        for attr, label, limit in safety_report.ROWS
+    ]
+    figure = figures.cdf_figure(
+        panels=panels,
+        title=f"safety minima over the whole flight, {n} runs",
+        path=out / figures.FIGURES_DIR / "safety_minima.png",
+    )
+    doc = safety_report.sweep_json(outcomes, command=command, thresholds=thresholds, wall_s=wall)
+    (out / "safety.json").write_text(json.dumps(doc, indent=2) + "\n")
+    text = safety_report.render_report(
+        outcomes,
+        command=command,
+        thresholds=thresholds,
+        figure=figure.relative_to(out).as_posix(),
+        wall_s=wall,
+    )
+    report_path = out / "report.md"
+    report_path.write_text(text)
+    failed = sum(1 for o in outcomes if o.error is not None)
+    counts = ", ".join(
+        f"{k} {sum(k in o.violations(thresholds) for o in outcomes)}" for k in safety_report.VIOLATION_TEXT
+    )
+    typer.echo(f"{report_path}: {n - failed}/{n} runs ok; violations: {counts}; wall time {wall:.1f} s")
     if failed:
         typer.echo(f"error: {failed} run(s) failed; see the list in {report_path}", err=True)
         raise typer.Exit(code=1)

@@ -68,7 +68,11 @@ DURATION = positive("simulated seconds, warm-up included", "S")
 COMM_LOSS = typer.Option(
     min=0.0, max=1.0, metavar="P", help="probability that a message between MAVs is lost"
 )
-WARMUP = typer.Option(min=0.0, metavar="S", help="metrics start after S seconds")
+WARMUP = typer.Option(
+    min=0.0,
+    metavar="S",
+    help="tracking and formation metrics start after S seconds (the safety minima cover the whole flight)",
+)
 REPLAN = typer.Option(
     min=0.0,
     metavar="HZ",

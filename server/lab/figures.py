@@ -152,3 +152,34 @@ def draw_all(summaries: Sequence[FamilySummary], out_dir: Path) -> dict[str, lis
     for s in summaries:
         drawn[s.family] = methods_figures(s, fig_dir) if s.family == "methods" else [sweep_figure(s, fig_dir)]
     return {family: [p.relative_to(out_dir).as_posix() for p in paths] for family, paths in drawn.items()}
+
+
+def cdf_figure(
+    *,
+    panels: Sequence[tuple[Sequence[float], str, float | None]],
+    title: str,
+    path: Path,
+) -> Path:
+    """Empirical CDFs side by side, one panel per (values, x-axis label, threshold or None), the threshold a
+    red dashed line with how many values fall below it; saved to `path`. The safety sweep draws its runs'
+    minima this way: the lower tail is what matters."""
+    cols = 2
+    rows = max(1, (len(panels) + cols - 1) // cols)
+    fig = Figure(figsize=(FIGURE_SIZE_IN[0] * 1.5, FIGURE_SIZE_IN[1] * rows * 0.85))
+    for k, (values, xlabel, threshold) in enumerate(panels):
+        ax = fig.add_subplot(rows, cols, k + 1)
+        data = np.sort(_finite(values))
+        if data.size:
+            ax.step(data, np.arange(1, data.size + 1) / data.size, where="post", color="tab:blue")
+        else:
+            ax.text(0.5, 0.5, "no values", ha="center", va="center", transform=ax.transAxes)
+        if threshold is not None:
+            below = int(np.sum(data < threshold))
+            ax.axvline(threshold, color="tab:red", linestyle="--", label=f"{threshold:g} m: {below} below")
+            ax.legend(loc="lower right")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("fraction of runs")
+        ax.set_ylim(0.0, 1.02)
+        ax.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    return _save(fig, path)

@@ -1,5 +1,11 @@
-"""The metrics of a simulation run (docs/method.md#experiments), computed from what a `Recorder` collected
-after the warm-up.
+"""The metrics of a simulation run (docs/method.md#experiments), computed from what a `Recorder` collected:
+the safety minima over the whole flight, everything else after the warm-up.
+
+The warm-up (take-off, spreading out to the slots, the filters settling) is left out of formation and
+tracking quality only: it is also where MAVs start side by side and cross each other's paths, so a safety
+minimum that skipped it would miss the likeliest collisions. The Recorder sees every control tick from the
+first one; it keeps running minima of the safety distances over all of them and the full samples only from
+warmup_s on.
 
 Names are a public interface (the JSON report, the experiments' tables): keep them, add new ones beside them.
 
@@ -14,18 +20,23 @@ Names are a public interface (the JSON report, the experiments' tables): keep th
   MAV positions about the true person, K = MAVs in formation >= 2) from 360/K degrees;
 - distance_error_m, height_error_m: mean absolute error of the true horizontal distance to the person and of
   the true height above the person's centre, to d_des and h_des;
-- min_separation_m (3-D, any two airborne MAVs), min_obstacle_clearance_m (horizontal distance of an
-  airborne MAV to a trunk's surface, below its top), min_person_distance_m (horizontal, airborne MAVs), over
-  every tick;
+- safety, over the whole flight (every tick from the first, warm-up included; a MAV counts from the moment
+  it leaves the ground, in_air, until it has landed): min_separation_m (3-D, any two airborne MAVs),
+  min_obstacle_clearance_m (horizontal distance of an airborne MAV to a trunk's surface, below its top;
+  negative inside it: contact), min_person_distance_m (horizontal, airborne MAVs);
 - min_believed_separation_m: min_separation_m between the positions the MAVs believe they are at (their
   self-localisation, GPS drift included), which is what the controllers keep apart; the gap to
   min_separation_m is what the drift costs;
+- where and when each safety minimum happened, to reproduce it: min_separation_t_s and min_separation_pair
+  [vehicle id, vehicle id], the same for min_believed_separation_, min_obstacle_clearance_t_s and
+  min_obstacle_clearance_pair [vehicle id, obstacle id], min_person_distance_t_s and
+  min_person_distance_vehicle (the first tick at the minimum; null when the minimum is);
 - tick_ms {median, p99}: wall time of one agent tick (tracker + controller) of MAVs in formation;
-- realtime_factor: simulated seconds per wall-clock second, after the warm-up like everything else
+- realtime_factor: simulated seconds per wall-clock second, after the warm-up like the tracking metrics
   (simulation, control and this bookkeeping included).
 Extras: estimate_fraction (MAV-ticks in formation with an estimate), detected_fraction (frames whose person
-was also not hidden by a trunk, so the detector reported it), frames, samples. A metric with no data is
-null.
+was also not hidden by a trunk, so the detector reported it), frames, samples (ticks after the warm-up),
+flight_ticks (every tick, the safety minima's). A metric with no data is null.
 """
 
 from __future__ import annotations
@@ -38,12 +49,14 @@ from typing import Any
 import numpy as np
 
 from controller.messages import Obstacle
-from server.separation import obstacle_clearance_m
+from server.separation import closest_obstacle
+
+WARMUP_EPS_S = 1e-9  # a tick stamped this close below warmup_s counts as after it (float steps i / rate_hz)
 
 
 @dataclass(frozen=True, eq=False)
 class TickSample:
-    """One control tick after the warm-up.
+    """One control tick.
 
     positions_m (K, 3) true MAV positions; in_formation (K,) and in_air (K,) bool; person_m (3,) true centre;
     estimates_m (K, 3) fused estimates (NaN rows where none); cov_traces_m2 (K,) (NaN where none);
@@ -63,11 +76,98 @@ class TickSample:
     believed_positions_m: np.ndarray | None = None
 
 
-class Recorder:
-    """Collects tick samples, camera frames and tick timings; `metrics()` reduces them."""
+@dataclass(frozen=True)
+class Closest:
+    """The smallest value of one safety distance so far: metres, the first tick it was reached at (s), and
+    between what (two vehicle ids, a vehicle id and an obstacle id, or one vehicle id for the person)."""
 
-    def __init__(self, *, obstacles: Sequence[Obstacle] = ()) -> None:
+    distance_m: float = math.inf
+    t_s: float | None = None
+    between: tuple[int | str, ...] = ()
+
+    def lower(self, distance_m: float, t_s: float, between: tuple[int | str, ...]) -> Closest:
+        """This minimum, or the new value if it is strictly lower (ties keep the earlier tick)."""
+        return Closest(distance_m, t_s, between) if distance_m < self.distance_m else self
+
+
+class FlightSafety:
+    """Running minima of the safety distances over every tick of a flight: closest true pair, closest believed
+    pair, obstacle clearance and closest approach to the person, with when and between whom (module
+    docstring). Keeps four `Closest` values, not the samples, so a whole flight costs no memory."""
+
+    def __init__(self, *, obstacles: Sequence[Obstacle] = (), vehicle_ids: Sequence[int] = ()) -> None:
         self._obstacles = tuple(obstacles)
+        self._ids = tuple(int(v) for v in vehicle_ids)
+        self.separation = Closest()
+        self.believed_separation = Closest()
+        self.obstacle_clearance = Closest()
+        self.person_distance = Closest()
+        self.ticks = 0
+
+    def add(self, sample: TickSample) -> None:
+        """Take one tick's airborne MAVs into the minima."""
+        self.ticks += 1
+        air = np.flatnonzero(sample.in_air)
+        if air.size == 0:
+            return
+        ids = self._ids if len(self._ids) == len(sample.in_air) else tuple(range(1, len(sample.in_air) + 1))
+        t = sample.t_s
+        pos = sample.positions_m[air]
+        d, i, j = closest_pair(pos)
+        if i >= 0:
+            self.separation = self.separation.lower(d, t, (ids[air[i]], ids[air[j]]))
+        believed = sample.positions_m if sample.believed_positions_m is None else sample.believed_positions_m
+        d, i, j = closest_pair(believed[air])
+        if i >= 0:
+            self.believed_separation = self.believed_separation.lower(d, t, (ids[air[i]], ids[air[j]]))
+        d, i, j = closest_obstacle(pos, self._obstacles)
+        if i >= 0:
+            pair = (ids[air[i]], self._obstacles[j].obstacle_id)
+            self.obstacle_clearance = self.obstacle_clearance.lower(d, t, pair)
+        rho = np.hypot(pos[:, 0] - sample.person_m[0], pos[:, 1] - sample.person_m[1])
+        i = int(np.argmin(rho))
+        self.person_distance = self.person_distance.lower(float(rho[i]), t, (ids[air[i]],))
+
+    def metrics(self) -> dict[str, Any]:
+        """The safety metrics by name: the four minima, then when and between whom each happened."""
+        sep, bel, clear, person = (
+            self.separation,
+            self.believed_separation,
+            self.obstacle_clearance,
+            self.person_distance,
+        )
+        return {
+            "min_separation_m": _num(sep.distance_m),
+            "min_obstacle_clearance_m": _num(clear.distance_m),
+            "min_person_distance_m": _num(person.distance_m),
+            "min_believed_separation_m": _num(bel.distance_m),
+            "min_separation_t_s": _num(sep.t_s),
+            "min_separation_pair": list(sep.between) or None,
+            "min_believed_separation_t_s": _num(bel.t_s),
+            "min_believed_separation_pair": list(bel.between) or None,
+            "min_obstacle_clearance_t_s": _num(clear.t_s),
+            "min_obstacle_clearance_pair": list(clear.between) or None,
+            "min_person_distance_t_s": _num(person.t_s),
+            "min_person_distance_vehicle": person.between[0] if person.between else None,
+            "flight_ticks": self.ticks,
+        }
+
+
+class Recorder:
+    """Collects tick samples, camera frames and tick timings; `metrics()` reduces them.
+
+    Every tick goes to `add_tick`, from the first: the safety minima take all of them (`FlightSafety`), the
+    tracking metrics only those from warmup_s on (the only samples kept). vehicle_ids: the samples' rows, for
+    naming the closest pairs (default 1..K). Frames and tick timings are added by the caller after the
+    warm-up only.
+    """
+
+    def __init__(
+        self, *, obstacles: Sequence[Obstacle] = (), warmup_s: float = 0.0, vehicle_ids: Sequence[int] = ()
+    ) -> None:
+        self._obstacles = tuple(obstacles)
+        self._warmup_s = float(warmup_s)
+        self._safety = FlightSafety(obstacles=obstacles, vehicle_ids=vehicle_ids)
         self._samples: list[TickSample] = []
         self._in_frame: list[bool] = []
         self._detected: list[bool] = []
@@ -75,7 +175,10 @@ class Recorder:
         self._tick_s: list[float] = []
 
     def add_tick(self, sample: TickSample) -> None:
-        self._samples.append(sample)
+        """One control tick: into the safety minima always, kept for tracking from the warm-up's end on."""
+        self._safety.add(sample)
+        if sample.t_s >= self._warmup_s - WARMUP_EPS_S:
+            self._samples.append(sample)
 
     def add_frame(self, *, in_frame: bool, center_offset_px: float, detected: bool | None = None) -> None:
         """One camera frame; detected defaults to in_frame (no occluder)."""
@@ -100,6 +203,7 @@ class Recorder:
             obstacles=self._obstacles,
             sim_s=sim_s,
             wall_s=wall_s,
+            safety=self._safety,
         )
         detected = np.asarray(self._detected, dtype=bool)
         metrics["detected_fraction"] = _num(detected.mean()) if detected.size else None
@@ -140,13 +244,20 @@ def spacing_error_deg(*, positions_xy_m: np.ndarray, person_xy_m: np.ndarray) ->
     return float(np.degrees(np.mean(np.abs(gaps - 2.0 * np.pi / k))))
 
 
-def min_pair_distance_m(points_m: np.ndarray) -> float:
-    """Smallest 3-D distance between any two of points (K, 3); inf for K < 2."""
+def closest_pair(points_m: np.ndarray) -> tuple[float, int, int]:
+    """(distance, i, j) of the two closest of points (K, 3), i < j, 3-D; (inf, -1, -1) for K < 2."""
     if len(points_m) < 2:
-        return math.inf
+        return math.inf, -1, -1
     diff = points_m[:, None, :] - points_m[None, :, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
-    return float(np.min(dist[np.triu_indices(len(points_m), 1)]))
+    rows, cols = np.triu_indices(len(points_m), 1)
+    best = int(np.argmin(dist[rows, cols]))
+    return float(dist[rows[best], cols[best]]), int(rows[best]), int(cols[best])
+
+
+def min_pair_distance_m(points_m: np.ndarray) -> float:
+    """Smallest 3-D distance between any two of points (K, 3); inf for K < 2."""
+    return closest_pair(points_m)[0]
 
 
 def tracking_error_by_vehicle_m(samples: Sequence[TickSample]) -> list[float | None]:
@@ -171,10 +282,15 @@ def compute_metrics(
     obstacles: Sequence[Obstacle],
     sim_s: float,
     wall_s: float,
+    safety: FlightSafety | None = None,
 ) -> dict[str, Any]:
-    """Reduce the recorded run to the report's metrics (module docstring)."""
+    """Reduce the recorded run to the report's metrics (module docstring). safety: the whole flight's minima;
+    None takes them from `samples` alone."""
+    if safety is None:
+        safety = FlightSafety(obstacles=obstacles)
+        for s in samples:
+            safety.add(s)
     errors, traces, spacing, dist_err, height_err = [], [], [], [], []
-    min_sep = min_believed_sep = min_clear = min_person = math.inf
     with_estimate = formation_slots = 0
     for s in samples:
         f = s.in_formation
@@ -192,15 +308,7 @@ def compute_metrics(
             sp = spacing_error_deg(positions_xy_m=pos[:, :2], person_xy_m=s.person_m[:2])
             if math.isfinite(sp):
                 spacing.append(sp)
-        air = s.positions_m[s.in_air]
-        if len(air):
-            min_sep = min(min_sep, min_pair_distance_m(air))
-            believed = s.positions_m if s.believed_positions_m is None else s.believed_positions_m
-            min_believed_sep = min(min_believed_sep, min_pair_distance_m(believed[s.in_air]))
-            min_clear = min(min_clear, obstacle_clearance_m(air, obstacles))
-            min_person = min(
-                min_person, float(np.min(np.hypot(air[:, 0] - s.person_m[0], air[:, 1] - s.person_m[1])))
-            )
+    flight = safety.metrics()
     frames = np.asarray(in_frame, dtype=bool)
     ticks_ms = np.asarray(tick_s, dtype=float) * 1e3
     return {
@@ -211,13 +319,13 @@ def compute_metrics(
         "spacing_error_deg": _num(np.mean(spacing)) if spacing else None,
         "distance_error_m": _num(np.mean(dist_err)) if dist_err else None,
         "height_error_m": _num(np.mean(height_err)) if height_err else None,
-        "min_separation_m": _num(min_sep),
-        "min_obstacle_clearance_m": _num(min_clear),
-        "min_person_distance_m": _num(min_person),
+        "min_separation_m": flight.pop("min_separation_m"),
+        "min_obstacle_clearance_m": flight.pop("min_obstacle_clearance_m"),
+        "min_person_distance_m": flight.pop("min_person_distance_m"),
         "tick_ms": _stats(ticks_ms, keys=("median", "p99")),
         "realtime_factor": _num(sim_s / wall_s) if wall_s > 0 else None,
         "estimate_fraction": _num(with_estimate / formation_slots) if formation_slots else None,
-        "min_believed_separation_m": _num(min_believed_sep),
+        **flight,
         "frames": int(frames.size),
         "samples": len(samples),
     }

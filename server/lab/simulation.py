@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from controller.params import ParameterError
-from server.lab.metrics import Recorder, TickSample
+from server.lab.metrics import WARMUP_EPS_S, Recorder, TickSample
 from server.settings import RunSettings, real_number
 from vehicles.agent import AgentParams
 from vehicles.mission import MissionSnapshot, Phase, VehicleSnapshot
@@ -31,8 +31,9 @@ TIMING_METRICS = ("tick_ms", "realtime_factor")
 class SimConfig(RunSettings):
     """One headless run: the team, world and rates of `RunSettings` (server/settings.py), and its length.
 
-    duration_s: simulated seconds (> 0), warm-up included; warmup_s: metrics start after this (0 <= warmup_s
-    < duration_s; the default covers takeoff, about 7 s, and settling).
+    duration_s: simulated seconds (> 0), warm-up included; warmup_s: the tracking and formation metrics start
+    after this (0 <= warmup_s < duration_s; the default covers takeoff, about 7 s, and settling); the safety
+    minima cover the whole flight (server/lab/metrics.py).
     """
 
     duration_s: float = 60.0
@@ -111,26 +112,28 @@ def run_simulation(config: SimConfig, *, progress: Callable[[float], None] | Non
         agent_params=AgentParams(replan_period_s=config.replan_period_s),
     )
     mission, world = setup.mission, setup.world
-    recorder = Recorder(obstacles=mission.obstacles())
+    ids = mission.vehicle_ids
+    recorder = Recorder(obstacles=mission.obstacles(), warmup_s=config.warmup_s, vehicle_ids=ids)
     steps = max(1, round(config.duration_s * config.rate_hz))
     per_second = max(1, round(config.rate_hz))
-    ids = mission.vehicle_ids
     wall0 = None
     first = steps + 1
     for i in range(1, steps + 1):
         t = i / config.rate_hz
-        if wall0 is None and t >= config.warmup_s - 1e-9:
+        if wall0 is None and t >= config.warmup_s - WARMUP_EPS_S:
             wall0, first = time.perf_counter(), i  # timing starts with the first measured tick
         mission.step(t)
         frames = world.drain_frames()
-        if wall0 is None:
-            continue
         snap = mission.snapshot()
         sample = _sample(setup, snap, t)
-        recorder.add_tick(sample)
+        recorder.add_tick(sample)  # every tick: the safety minima cover the whole flight
+        if wall0 is None:
+            if progress is not None and i % per_second == 0:
+                progress(t)
+            continue
         formation = {vid for vid, f in zip(ids, sample.in_formation, strict=True) if f}
         for f in frames:
-            if f.vehicle_id in formation and f.stamp_s >= config.warmup_s - 1e-9:
+            if f.vehicle_id in formation and f.stamp_s >= config.warmup_s - WARMUP_EPS_S:
                 recorder.add_frame(
                     in_frame=f.view.in_frame, center_offset_px=f.view.center_offset_px, detected=f.detected
                 )

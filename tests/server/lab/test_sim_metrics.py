@@ -1,6 +1,7 @@
 """The run metrics on hand-made recordings with known answers."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -179,3 +180,76 @@ def test_believed_separation_is_measured_between_the_self_localised_positions():
 def test_believed_separation_defaults_to_the_true_one_without_self_localisation():
     m = _metrics([_sample(_ring([0.0, 20.0]))])
     assert m["min_believed_separation_m"] == pytest.approx(m["min_separation_m"])
+
+
+def _flight(positions, t, in_air=None):
+    """A tick of two or more MAVs during any phase (tracking inputs perfect, so only safety differs)."""
+    k = len(positions)
+    return replace(
+        _sample(np.asarray(positions, float), t=t), in_air=np.ones(k, bool) if in_air is None else in_air
+    )
+
+
+def test_mavs_touching_during_the_warm_up_set_the_minimum_separation_with_when_and_which():
+    rec = Recorder(warmup_s=20.0, vehicle_ids=(4, 7, 9))
+    far = _ring([0, 120, 240])
+    touching = far.copy()
+    touching[2] = touching[1] + [0.05, 0.0, 0.0]  # vehicles 7 and 9 touch while spreading out
+    rec.add_tick(_flight(far, t=1.0))
+    rec.add_tick(_flight(touching, t=3.5))
+    rec.add_tick(_flight(far, t=20.0))
+    m = rec.metrics(sim_s=10.0, wall_s=1.0)
+    assert m["min_separation_m"] == pytest.approx(0.05)
+    assert m["min_separation_t_s"] == pytest.approx(3.5)
+    assert m["min_separation_pair"] == [7, 9]
+    assert m["min_believed_separation_m"] == pytest.approx(0.05)
+    assert m["min_believed_separation_pair"] == [7, 9]
+    assert m["flight_ticks"] == 3 and m["samples"] == 1
+
+
+def test_tracking_metrics_leave_out_the_warm_up_samples():
+    rec = Recorder(warmup_s=20.0)
+    pos = _ring([0, 180])
+    bad = np.array([PERSON + [5.0, 0, 0], PERSON + [5.0, 0, 0]])
+    rec.add_tick(_sample(_ring([0, 10], radius=3.0), estimates=bad, traces=np.full(2, 50.0), t=5.0))
+    rec.add_tick(_sample(pos, estimates=np.array([PERSON + [1.0, 0, 0]] * 2), t=20.0 - 1e-12))
+    m = rec.metrics(sim_s=10.0, wall_s=1.0)
+    assert m["tracking_error_m"]["mean"] == pytest.approx(1.0)
+    assert m["cov_trace_m2"]["mean"] == pytest.approx(1.0)
+    assert m["spacing_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert m["distance_error_m"] == pytest.approx(0.0, abs=1e-6)
+    assert m["samples"] == 1
+    assert rec.tracking_error_by_vehicle_m() == [pytest.approx(1.0), pytest.approx(1.0)]
+
+
+def test_grounded_mavs_are_left_out_until_they_take_off():
+    rec = Recorder()
+    side_by_side = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [9.0, 0.0, 8.0]])
+    rec.add_tick(_flight(side_by_side, t=0.1, in_air=np.array([False, False, True])))
+    rec.add_tick(_flight(side_by_side + [0, 0, 1.0], t=0.2, in_air=np.array([True, True, True])))
+    m = rec.metrics(sim_s=1.0, wall_s=1.0)
+    assert m["min_separation_m"] == pytest.approx(0.3)
+    assert m["min_separation_t_s"] == pytest.approx(0.2)
+    assert m["min_separation_pair"] == [1, 2]
+
+
+def test_obstacle_and_person_minima_say_when_and_which():
+    tree = Obstacle(obstacle_id="tree-3", center_m=np.array((0.0, 0.0)), radius_m=0.5, height_m=12.0)
+    rec = Recorder(obstacles=(tree,), warmup_s=30.0, vehicle_ids=(1, 2))
+    rec.add_tick(_flight([[3.0, 0.0, 8.0], [0.0, 9.0, 8.0]], t=2.0))
+    rec.add_tick(_flight([[0.4, 0.0, 8.0], [0.0, 9.0, 8.0]], t=4.0))  # vehicle 1 inside the trunk
+    rec.add_tick(_flight([[3.0, 0.0, 8.0], [PERSON[0], PERSON[1] + 0.5, 8.0]], t=6.0))
+    m = rec.metrics(sim_s=1.0, wall_s=1.0)
+    assert m["min_obstacle_clearance_m"] == pytest.approx(-0.1)
+    assert m["min_obstacle_clearance_t_s"] == pytest.approx(4.0)
+    assert m["min_obstacle_clearance_pair"] == [1, "tree-3"]
+    assert m["min_person_distance_m"] == pytest.approx(0.5)
+    assert m["min_person_distance_t_s"] == pytest.approx(6.0)
+    assert m["min_person_distance_vehicle"] == 2
+    assert m["tracking_error_m"]["mean"] is None  # all three ticks were in the warm-up
+
+
+def test_without_airborne_ticks_the_where_and_when_are_null():
+    m = _metrics([])
+    assert m["min_separation_t_s"] is None and m["min_separation_pair"] is None
+    assert m["min_person_distance_vehicle"] is None and m["flight_ticks"] == 0
