@@ -11,10 +11,10 @@ from server.lab.metrics import (
     Recorder,
     TickSample,
     min_pair_distance_m,
-    obstacle_clearance_m,
     spacing_error_deg,
     tracking_error_by_vehicle_m,
 )
+from server.separation import obstacle_clearance_m
 
 PERSON = np.array([1.0, 2.0, 0.9])
 
