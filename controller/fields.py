@@ -300,6 +300,13 @@ def covariance_radius_m(cov_m2: np.ndarray) -> float | np.ndarray:
     return float(radius) if radius.ndim == 0 else radius
 
 
+def teammate_age_term_m(ages_s: np.ndarray, params: FieldParams) -> np.ndarray:
+    """r_comm of eq. 15 for plans of these ages (s): teammate_speed_mps * max(0, age - grace), m."""
+    return params.teammate_speed_mps * np.maximum(
+        np.asarray(ages_s, dtype=float) - params.teammate_age_grace_s, 0.0
+    )
+
+
 def teammate_paths(
     plans: Sequence[HorizonPlan],
     *,
@@ -347,9 +354,11 @@ def teammate_paths(
         paths = np.stack([plan_path(p, now_s=now_s, dt_s=dt_s, steps=steps) for p in plans])
     cap = params.covariance_radius_cap_m
     radii = np.minimum(covariance_radius_m(covs), cap)
-    age = np.maximum(now_s - stamps - params.teammate_age_grace_s, 0.0)
     d_max = (
-        params.teammate_d_max_base_m + min(own_cov_radius_m, cap) + radii + params.teammate_speed_mps * age
+        params.teammate_d_max_base_m
+        + min(own_cov_radius_m, cap)
+        + radii
+        + teammate_age_term_m(now_s - stamps, params)
     )
     ids = np.array([p.vehicle_id for p in plans], dtype=int)
     in_formation = np.array([p.in_formation for p in plans], dtype=bool)

@@ -31,6 +31,7 @@ from controller.fields import (
     ObstacleSet,
     TeammatePaths,
     covariance_radius_m,
+    teammate_age_term_m,
     teammate_paths,
 )
 from controller.fields_kernel import external_inputs_compiled
@@ -42,7 +43,14 @@ from controller.messages import (
     SolveStatus,
     VehicleState,
 )
-from controller.mpc import ModelPredictiveController, MpcParams, braking_plan, predict
+from controller.mpc import (
+    HalfPlanes,
+    ModelPredictiveController,
+    MpcParams,
+    MpcSolution,
+    braking_plan,
+    predict,
+)
 from controller.params import ControllerParams, FormationParams, Method
 from controller.reference import (
     bearing_rad,
@@ -51,7 +59,7 @@ from controller.reference import (
     plan_state_at,
     terminal_reference,
 )
-from controller.separation import SeparationRows, separation_rows
+from controller.separation import SeparationRows, age_margin_m, imminent_miss_m, separation_rows
 from controller.teammates import TeammateView, align_rows
 
 DEFAULT_COV_M2 = np.eye(3) * 0.25
@@ -212,12 +220,9 @@ class FormationController:
             half_planes=planes,
         )
         escape = None
-        if (
-            sol.ok
-            and rows is not None
-            and sol.half_plane_violation_m > self._params.separation.escape_violation_m
-        ):
-            escape = f"escape: separation rows missed by {sol.half_plane_violation_m:.2f} m"
+        miss = self._imminent_miss(sol, planes)
+        if rows is not None and miss > self._params.separation.escape_violation_m:
+            escape = f"escape: separation rows of the next steps missed by {miss:.2f} m"
             target, target_v = self._escape_target(tick, mates, rows)
             sol = self._mpc.solve(
                 position_m=start_p,
@@ -437,18 +442,27 @@ class FormationController:
         prm = self._params
         if not prm.separation.enabled:
             return None
+        ages = mates.ages
+        speed_term = teammate_age_term_m(ages, prm.fields)
+        radii = mates.d_max_m - prm.fields.teammate_d_max_base_m - speed_term  # both r_sigma (eq. 15)
         return separation_rows(
             own_path_m=own_path,
             own_velocities_mps=own_vel,
             mates=mates,
-            mate_ages_s=mates.ages,
-            inflation_m=mates.d_max_m - prm.fields.teammate_d_max_base_m,
+            mate_ages_s=ages,
+            inflation_m=radii + age_margin_m(ages, speed_term_m=speed_term, params=prm.separation),
             obstacles=obstacle_set,
             own_cov_radius_m=min(self._own_cov_radius(own), prm.fields.covariance_radius_cap_m),
             dt_s=self._mpc_params.dt_s,
             own_id=self._id,
             params=prm.separation,
         )
+
+    def _imminent_miss(self, sol: MpcSolution, planes: HalfPlanes | None) -> float:
+        """How far a solved plan misses the separation rows of its first steps (0: none missed)."""
+        if not sol.ok or planes is None or sol.half_plane_violation_m == 0.0:
+            return 0.0
+        return imminent_miss_m(planes, sol.positions_m, steps=self._params.separation.escape_steps)
 
     def _escape_target(
         self, tick: _Tick, mates: TeammatePaths, rows: SeparationRows

@@ -51,8 +51,13 @@ class SeparationParams:
         the last step, and at it); brake_margin_max_m caps that room.
     cooperative_age_s: a teammate whose plan is older than this is not trusted to hold its own row.
     teammate_range_m, obstacle_range_m: pairs and trunks farther than this from every step give no rows.
-    escape_violation_m: a plan that misses its rows by more than this is replaced by an escape.
+    escape_violation_m, escape_steps: a plan that misses a row of its first escape_steps steps by more than
+        escape_violation_m is replaced by an escape (`imminent_miss_m`); later misses are left to the next
+        ticks, which see them sooner (a stale teammate's wide row may never hold, and must not stop the team).
     escape_climb_m: the height difference an escape aims for from a teammate closer than separation_m.
+    plan_deviation_mps2: how fast a teammate's newest plan can part from the last one we heard (two
+        vehicles' 4 m/s^2): a plan t old is off by at most plan_deviation_mps2 t^2 / 2, or the speed bound
+        times its age, whichever is less (`age_margin_m`).
     obstacle_row_weight: a trunk row is this many times a teammate row (its normal and offset scaled): all
         rows share the QP's one slack, the largest weighted violation, so when rows cannot all hold the plan
         gives way to a teammate (who also moves away) before a trunk (which does not).
@@ -68,8 +73,10 @@ class SeparationParams:
     teammate_range_m: float = 12.0
     obstacle_range_m: float = 12.0
     escape_violation_m: float = 0.05
+    escape_steps: int = 5
     escape_climb_m: float = 2.0
     obstacle_row_weight: float = 5.0
+    plan_deviation_mps2: float = 8.0
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
@@ -81,6 +88,17 @@ class SeparationParams:
             raise ValueError("SeparationParams.obstacle_row_weight must be > 0")
         if self.step_brake_mps2 <= 0.0 or self.brake_mps2 <= 0.0:
             raise ValueError("SeparationParams: the braking decelerations must be > 0")
+
+
+def imminent_miss_m(planes: HalfPlanes, positions_m: np.ndarray, *, steps: int) -> float:
+    """The largest shortfall (m, >= 0) of plan positions (N+2, 3) from the rows of steps 1..steps."""
+    near = planes.steps <= steps
+    if not near.any():
+        return 0.0
+    normals_z = np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
+    p = positions_m[planes.steps[near]]
+    reach = np.einsum("ri,ri->r", planes.normals_xy[near], p[:, :2]) + normals_z[near] * p[:, 2]
+    return max(0.0, float((planes.offsets[near] - reach).max()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,6 +119,13 @@ class SeparationRows:
     @property
     def count(self) -> int:
         return self.teammate_rows + self.obstacle_rows
+
+
+def age_margin_m(ages_s: np.ndarray, *, speed_term_m: np.ndarray, params: SeparationParams) -> np.ndarray:
+    """(J,) how far each teammate may be from the plan we heard, ages_s (J,) s old: the lesser of the speed
+    bound's term (speed_term_m (J,), eq. 15's r_comm) and the deviation a re-plan can build up."""
+    ages = np.maximum(np.asarray(ages_s, dtype=float), 0.0)
+    return np.minimum(speed_term_m, 0.5 * params.plan_deviation_mps2 * ages * ages)
 
 
 def braking_room_m(closing_mps: np.ndarray, *, decel_mps2: float, cap_m: float) -> np.ndarray:

@@ -15,7 +15,14 @@ from collections.abc import Sequence
 import numba
 import numpy as np
 
-from controller.fields import SANE_ABS, FieldParams, TeammatePaths, covariance_radius_m, teammate_paths
+from controller.fields import (
+    SANE_ABS,
+    FieldParams,
+    TeammatePaths,
+    covariance_radius_m,
+    teammate_age_term_m,
+    teammate_paths,
+)
 from controller.messages import HorizonPlan
 
 
@@ -219,13 +226,12 @@ class TeammateTable:
             out,
         )
         cap = params.covariance_radius_cap_m
-        age = np.maximum(now_s - self._stamps[rows] - params.teammate_age_grace_s, 0.0)
         radii = np.minimum(self._radii[rows], cap)
         d_max = (
             params.teammate_d_max_base_m
             + min(own_cov_radius_m, cap)
             + radii
-            + params.teammate_speed_mps * age
+            + teammate_age_term_m(now_s - self._stamps[rows], params)
         )
         ages = np.maximum(now_s - self._stamps[rows], 0.0)
         mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max, 0, ages)
