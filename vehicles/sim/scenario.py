@@ -176,6 +176,17 @@ def start_positions(
     return np.array(out)
 
 
+def fan_slot_offset_rad(starts_m: np.ndarray, person_xy_m: np.ndarray) -> float:
+    """The roster's slot offset that fans a launch arc out: slot k (vehicle ids in order, as the arc is laid
+    out) at the arc's mean bearing about the person + (k - (K - 1) / 2) 2 pi / K. Every MAV then moves away
+    from the arc's middle, the order kept, so no two transit paths cross: what keeps a team apart that hears
+    nothing of each other (with total link loss each MAV flies to its slot; docs/safety.md)."""
+    rel = np.asarray(starts_m, dtype=float)[:, :2] - np.asarray(person_xy_m, dtype=float)
+    angles = np.arctan2(rel[:, 1], rel[:, 0])
+    mean = math.atan2(float(np.sin(angles).sum()), float(np.cos(angles).sum()))
+    return mean - 0.5 * (len(angles) - 1) * 2.0 * math.pi / len(angles)
+
+
 def paper_virtual_obstacles() -> tuple[Obstacle, ...]:
     """The paper's 13 tree positions as virtual obstacles (kind "virtual"), ids virtual-1..virtual-13."""
     return tuple(
@@ -252,7 +263,8 @@ def build_sim(
     clock: Callable[[], float] | None = None,
 ) -> SimSetup:
     """Build the world and the mission for `scenario`. controller_params defaults to the method's defaults;
-    clock (e.g. time.perf_counter) is only used to time agent ticks."""
+    mission_params to the defaults, with a clustered start's slots fanned out from its arc
+    (`fan_slot_offset_rad`); clock (e.g. time.perf_counter) is only used to time agent ticks."""
     cparams = controller_params or ControllerParams(method=scenario.method)
     if cparams.method != scenario.method:
         raise ValueError(
@@ -305,6 +317,8 @@ def build_sim(
         rng=np.random.default_rng(streams.links),
         params=LinkParams(loss=scenario.comm_loss, latency_s=scenario.latency_s, jitter_s=scenario.jitter_s),
     )
+    if mission_params is None and scenario.start == "cluster":
+        mission_params = MissionParams(slot_offset_rad=fan_slot_offset_rad(starts, person_xy))
     mission = Mission(
         autopilots=autopilots,
         world=world,
