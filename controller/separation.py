@@ -65,7 +65,7 @@ class SeparationParams:
 
     enabled: bool = True
     separation_m: float = 1.6
-    obstacle_clearance_m: float = 1.0
+    obstacle_clearance_m: float = 0.2
     step_brake_mps2: float = 3.0
     brake_mps2: float = 2.0
     brake_margin_max_m: float = 4.0

@@ -130,7 +130,7 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
     )
     assert steps.tolist() == list(range(1, STEPS))
     angles = np.linspace(0.0, 2.0 * np.pi, 73)
-    disc = np.array([5.0, 0.0]) + 1.7 * np.column_stack([np.cos(angles), np.sin(angles)])  # r + 1 + 0.2
+    disc = np.array([5.0, 0.0]) + 0.9 * np.column_stack([np.cos(angles), np.sin(angles)])  # r + 0.2 + 0.2
     for n, b in zip(normals, offsets, strict=True):
         assert np.max(disc @ n[:2] - b) <= 1e-9  # the grown disc lies behind the plane
         assert np.max(disc @ n[:2] - b) == pytest.approx(0.0, abs=0.005)  # and touches it: tangent
@@ -144,7 +144,7 @@ def test_a_trunk_row_weighs_more_than_a_teammate_row():
     path = line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0])
     _, normals, offsets = obstacle_rows(own_path_m=path, obstacles=trunk, own_cov_radius_m=0.0, params=PARAMS)
     np.testing.assert_allclose(normals[:, 0], -5.0)
-    np.testing.assert_allclose(offsets, -5.0 * (5.0 - 1.5))
+    np.testing.assert_allclose(offsets, -5.0 * (5.0 - 0.7))  # the plane 0.5 + 0.2 m from the centre
 
 
 def test_no_trunk_row_above_the_trunk_top():
