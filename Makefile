@@ -45,7 +45,7 @@ kernels: $(STAMP)
 	$(PY) -c "from controller.warmup import warm_up; warm_up()"
 
 test: $(STAMP) chromium footage $(POSE_STAMP) kernels
-	$(PY) -m pytest -q -ra -n auto --durations=15 -m "not px4_sitl"
+	$(PY) -m pytest -q -ra -n auto --dist loadgroup --durations=15 -m "not px4_sitl"
 
 # The PX4 scenarios against real PX4 SITL (SIH): PX4_SITL=path/to/build/px4_sitl_default/bin/px4 (docs/px4.md
 # says how to build it). One scenario at a time: each starts and stops its own PX4 instances.
@@ -60,7 +60,7 @@ test-px4: $(STAMP)
 
 # The fast part: no closed-loop runs, browser or end-to-end tests (they run in `make test` and CI).
 check: $(STAMP) footage $(POSE_STAMP) kernels
-	$(PY) -m pytest -q -ra -n auto -m "not slow and not browser and not e2e"
+	$(PY) -m pytest -q -ra -n auto --dist loadgroup -m "not slow and not browser and not e2e"
 
 bench: $(STAMP)
 	$(VENV)/bin/skyring bench all
