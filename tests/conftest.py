@@ -126,8 +126,8 @@ GROUPS_CACHE_KEY = "skyring/xdist-groups"
 @pytest.hookimpl(optionalhook=True)  # xdist's hook: unknown under -p no:xdist
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Producer) -> LoadScopeScheduling | None:
     """`--dist loadgroup`, with the groups passed from the workers' collection as above. xdist's own passes
-    them by appending "@group" to each nodeid, which pytest 9.2's structured node ids silently ignore (xdist
-    issue 1386): every test went out on its own. Other --dist modes are xdist's."""
+    them by appending "@group" to each nodeid, which pytest 9.2's structured node ids silently ignore (a known
+    xdist bug with pytest 9.2): every test went out on its own. Other --dist modes are xdist's."""
     if config.getoption("dist", None) != "loadgroup":
         return None
     from xdist.scheduler import LoadScopeScheduling

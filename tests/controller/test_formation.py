@@ -196,7 +196,9 @@ def test_each_method_solves_with_teammates_and_trees(method):
     own = on_circle(0.0, 9.0, 6.0)
     for tick in range(20):
         out = step(ctrl, state(own), now_s=0.1 * tick, teammates=mates, obstacles=trees)
-        assert out.status == SolveStatus.SOLVED
+        # the teammate at 15 degrees is 2.4 m away, inside the separation rows' 2.6 m: solved or escaping,
+        # never a braking plan
+        assert out.status in (SolveStatus.SOLVED, SolveStatus.ESCAPE)
         assert_finite_output(out)
         own = out.plan.positions_m[1]
 

@@ -22,8 +22,11 @@ if TYPE_CHECKING:
 EXPECT_TIMEOUT_MS = 20_000  # a software-rendered page on a busy 2-core machine can take seconds per step
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Browser]:
+    """One headless chromium per test module. Not per session: Playwright's sync API keeps its event loop
+    running in the worker's main thread while the browser is open, and the longest (browser) tests run
+    first (tests/conftest.py), so a session-wide browser broke every later test that runs its own loop."""
     from live_harness import CHROMIUM_ARGS
     from playwright.sync_api import expect, sync_playwright
 
