@@ -36,6 +36,7 @@ import numpy as np
 
 from controller.fields import ObstacleSet, TeammatePaths
 from controller.mpc import HalfPlanes
+from controller.separation_kernel import empty_rows, obstacle_rows_kernel, teammate_rows_kernel
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,9 @@ class SeparationParams:
     step_brake_mps2, brake_mps2: the decelerations whose braking distance each cooperative row keeps (before
         the last step, and at it); brake_margin_max_m caps that room.
     cooperative_age_s: a teammate whose plan is older than this is not trusted to hold its own row.
-    teammate_range_m, obstacle_range_m: pairs and trunks farther than this from every step give no rows.
+    row_reach_m: a row that our previous plan meets with more than this to spare is left out: the new plan
+        starts where the previous one is and would have to move that much further, in 0.1 s of re-planning,
+        to meet it (it costs, as rows do, and cannot bind).
     escape_violation_m, escape_steps: a plan that misses a row of its first escape_steps steps by more than
         escape_violation_m is replaced by an escape (`imminent_miss_m`); later misses are left to the next
         ticks, which see them sooner (a stale teammate's wide row may never hold, and must not stop the team).
@@ -70,8 +73,7 @@ class SeparationParams:
     brake_mps2: float = 2.0
     brake_margin_max_m: float = 4.0
     cooperative_age_s: float = 0.5
-    teammate_range_m: float = 12.0
-    obstacle_range_m: float = 12.0
+    row_reach_m: float = 4.0
     escape_violation_m: float = 0.05
     escape_steps: int = 5
     escape_climb_m: float = 2.0
@@ -151,31 +153,35 @@ def teammate_rows(
     at the start state); mates.positions_m (J, S, 3); cooperative (J,) bool; inflation_m (J,) m.
     Returns steps (R,), normals (R, 3), offsets (R,) and the pair distances (J, S).
     """
-    diff = own_path_m[None, :, :] - mates.positions_m  # (J, S, 3)
-    dist = np.sqrt(np.einsum("jsi,jsi->js", diff, diff))  # (J, S)
-    tie = np.where(mates.vehicle_ids < own_id, 1.0, -1.0)  # coincident plans: split along x by id
+    diff_all = own_path_m[None, :, :] - mates.positions_m  # (J, S, 3)
+    dist_all = np.sqrt(np.einsum("jsi,jsi->js", diff_all, diff_all))  # (J, S)
+    gap_all = params.separation_m + inflation_m  # (J,) what each pair must keep
+    # teammates whose rows are all out of reach (module docstring) are left before the real work
+    near = dist_all.min(axis=1) < gap_all + params.brake_margin_max_m + params.row_reach_m
+    diff, dist, gap, coop = diff_all[near], dist_all[near], gap_all[near], cooperative[near]
+    tie = np.where(mates.vehicle_ids[near] < own_id, 1.0, -1.0)  # coincident plans: split along x by id
     fallback = np.zeros_like(diff)
     fallback[..., 0] = tie[:, None]
     normals = np.where(dist[..., None] > 1e-6, diff / np.maximum(dist, 1e-12)[..., None], fallback)
-    mate_v = np.gradient(mates.positions_m, dt_s, axis=1) if diff.shape[1] > 1 else np.zeros_like(diff)
-    closing = -np.einsum("jsi,jsi->js", normals, own_velocities_mps[None] - mate_v)  # (J, S) m/s
+    positions = mates.positions_m[near]
+    mate_v = np.gradient(positions, dt_s, axis=1) if diff.shape[1] > 1 else np.zeros_like(diff)
+    closing = -np.einsum("jsi,jsi->js", normals, own_velocities_mps[None] - mate_v)  # (J', S) m/s
     last = diff.shape[1] - 1
-    share = np.where(cooperative, 0.5, 1.0)[:, None]  # our part of the closing speed
+    share = np.where(coop, 0.5, 1.0)[:, None]  # our part of the closing speed
     room = braking_room_m(share * closing, decel_mps2=params.step_brake_mps2, cap_m=params.brake_margin_max_m)
     room[:, last] = braking_room_m(
         share[:, 0] * closing[:, last], decel_mps2=params.brake_mps2, cap_m=params.brake_margin_max_m
     )
-    room[~cooperative, :last] = 0.0
-    gap = params.separation_m + inflation_m  # (J,) what the pair must keep
+    room[~coop, :last] = 0.0
     # a . m + |q - m| = a . q: a cooperative row keeps p on our side of the midpoint plus half the gap, any
-    # other row keeps the whole gap from the teammate's plan.
-    a_dot_m = np.einsum("jsi,jsi->js", normals, mates.positions_m)
-    offsets = a_dot_m + np.where(cooperative[:, None], 0.5 * (dist + gap[:, None]), gap[:, None]) + room
-    use = dist.min(axis=1) < params.teammate_range_m  # (J,)
-    use_rows = np.zeros_like(dist, dtype=bool)
-    use_rows[use, 1:] = True
-    j, s = np.nonzero(use_rows)
-    return s, normals[j, s], offsets[j, s], dist
+    # other row keeps the whole gap from the teammate's plan. `keep` is each row's distance to go, measured
+    # along a from our previous plan: rows farther than row_reach_m from binding are left out.
+    keep = np.where(coop[:, None], 0.5 * (dist + gap[:, None]), gap[:, None]) + room
+    a_dot_m = np.einsum("jsi,jsi->js", normals, positions)
+    use = keep - dist > -params.row_reach_m
+    use[:, 0] = False
+    j, s = np.nonzero(use)
+    return s, normals[j, s], a_dot_m[j, s] + keep[j, s], dist_all
 
 
 def obstacle_rows(
@@ -185,7 +191,8 @@ def obstacle_rows(
     own_cov_radius_m: float,
     params: SeparationParams,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Tangent planes to every trunk near our previous plan, at steps 1..S-1 below its top.
+    """Tangent planes to every trunk near our previous plan (within row_reach_m of binding), at steps
+    1..S-1 below its top.
 
     Returns steps (R,), normals (R, 3) with zero z, offsets (R,), both scaled by obstacle_row_weight."""
     if obstacles.count == 0:
@@ -198,7 +205,7 @@ def obstacle_rows(
     grown = obstacles.radii_m + params.obstacle_clearance_m + own_cov_radius_m  # (M,)
     offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown[:, None]
     below = own_path_m[None, :, 2] < obstacles.heights_m[:, None] + params.obstacle_clearance_m
-    near = dist - obstacles.radii_m[:, None] < params.obstacle_range_m
+    near = dist - grown[:, None] < params.row_reach_m
     use = below & near
     use[:, 0] = False
     m, s = np.nonzero(use)
@@ -220,34 +227,35 @@ def separation_rows(
     dt_s: float,
     own_id: int,
     params: SeparationParams,
+    compiled: bool = True,
 ) -> SeparationRows:
     """Every separation row of one tick (see the module docstring), as the MPC's soft `HalfPlanes`.
 
     own_path_m, own_velocities_mps: (S, 3) our previous plan on the horizon, starting at the start state;
     mate_ages_s (J,): each teammate plan's age; inflation_m (J,): what each row grows by (m).
-    The rows constrain plan step n = 1..S-1 (the MPC's x(n); x(0) is the measured state).
+    The rows constrain plan step n = 1..S-1 (the MPC's x(n); x(0) is the measured state). compiled: build
+    them with separation_kernel.py's kernels (the default) or with the numpy reference here.
     """
     cooperative = mates.in_formation & (mate_ages_s <= params.cooperative_age_s)
+    build = _compiled_rows if compiled else _reference_rows
+    (t_steps, t_normals, t_offsets, dist), (o_steps, o_normals, o_offsets) = build(
+        own_path_m,
+        own_velocities_mps,
+        mates,
+        cooperative,
+        inflation_m,
+        obstacles,
+        own_cov_radius_m,
+        dt_s,
+        own_id,
+        params,
+    )
     if mates.count:
-        t_steps, t_normals, t_offsets, dist = teammate_rows(
-            own_path_m=own_path_m,
-            own_velocities_mps=own_velocities_mps,
-            mates=mates,
-            cooperative=cooperative,
-            inflation_m=inflation_m,
-            dt_s=dt_s,
-            own_id=own_id,
-            params=params,
-        )
         per_mate = dist.min(axis=1)
         closest_index = int(np.argmin(per_mate))
         closest = float(per_mate[closest_index])
     else:
-        t_steps, t_normals, t_offsets = np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
         closest_index, closest = -1, math.inf
-    o_steps, o_normals, o_offsets = obstacle_rows(
-        own_path_m=own_path_m, obstacles=obstacles, own_cov_radius_m=own_cov_radius_m, params=params
-    )
     normals = np.concatenate([t_normals, o_normals])
     planes = HalfPlanes(
         steps=np.concatenate([t_steps, o_steps]).astype(np.int64),
@@ -256,3 +264,71 @@ def separation_rows(
         offsets=np.concatenate([t_offsets, o_offsets]),
     )
     return SeparationRows(planes, int(t_steps.shape[0]), int(o_steps.shape[0]), closest, closest_index)
+
+
+def _reference_rows(
+    own_path, own_vel, mates, cooperative, inflation, obstacles, own_cov_radius, dt, own_id, params
+):
+    """The rows by the numpy functions above: ((steps, normals, offsets, pair distances), (steps, normals,
+    offsets))."""
+    if mates.count:
+        mate_rows = teammate_rows(
+            own_path_m=own_path,
+            own_velocities_mps=own_vel,
+            mates=mates,
+            cooperative=cooperative,
+            inflation_m=inflation,
+            dt_s=dt,
+            own_id=own_id,
+            params=params,
+        )
+    else:
+        mate_rows = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, len(own_path))))
+    trunk_rows = obstacle_rows(
+        own_path_m=own_path, obstacles=obstacles, own_cov_radius_m=own_cov_radius, params=params
+    )
+    return mate_rows, trunk_rows
+
+
+def _compiled_rows(
+    own_path, own_vel, mates, cooperative, inflation, obstacles, own_cov_radius, dt, own_id, params
+):
+    """The same rows as `_reference_rows`, by separation_kernel.py's kernels."""
+    own_path = np.ascontiguousarray(own_path, dtype=float)
+    steps = own_path.shape[0]
+    count = mates.count
+    m_steps, m_normals, m_offsets = empty_rows(count * steps)
+    dist = np.zeros((count, steps))
+    m = teammate_rows_kernel(
+        own_path,
+        np.ascontiguousarray(own_vel, dtype=float),
+        np.ascontiguousarray(mates.positions_m, dtype=float),
+        np.asarray(mates.vehicle_ids, dtype=np.int64),
+        np.asarray(cooperative, dtype=np.bool_),
+        params.separation_m + np.asarray(inflation, dtype=float),
+        float(dt),
+        int(own_id),
+        params.step_brake_mps2,
+        params.brake_mps2,
+        params.brake_margin_max_m,
+        params.row_reach_m,
+        m_steps,
+        m_normals,
+        m_offsets,
+        dist,
+    )
+    o_steps, o_normals, o_offsets = empty_rows(obstacles.count * steps)
+    o = obstacle_rows_kernel(
+        own_path,
+        np.ascontiguousarray(obstacles.centers_m, dtype=float),
+        np.asarray(obstacles.radii_m, dtype=float),
+        np.asarray(obstacles.heights_m, dtype=float),
+        params.obstacle_clearance_m + float(own_cov_radius),
+        params.obstacle_clearance_m,
+        params.row_reach_m,
+        params.obstacle_row_weight,
+        o_steps,
+        o_normals,
+        o_offsets,
+    )
+    return (m_steps[:m], m_normals[:m], m_offsets[:m], dist), (o_steps[:o], o_normals[:o], o_offsets[:o])

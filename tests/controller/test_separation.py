@@ -91,7 +91,7 @@ def test_closing_in_adds_the_braking_distance_of_our_half_of_the_closing_speed()
     step and min(4^2 / (2 * 2), 4) = 4 m at it."""
     a_path, b_path = line([0.0, 0.0, 8.0], [4, 0, 0]), line([20.0, 0.0, 8.0], [-4, 0, 0])
     a_vel = np.tile([4.0, 0.0, 0.0], (STEPS, 1))
-    prm = SeparationParams(teammate_range_m=30.0)
+    prm = SeparationParams(row_reach_m=30.0)
     moving = rows_for(a_path, a_vel, mates([b_path]), prm=prm)
     assert moving.count == STEPS - 1
     np.testing.assert_allclose(moving.planes.normals_xy, [[-1.0, 0.0]] * (STEPS - 1), atol=1e-12)
@@ -107,7 +107,7 @@ def test_braking_room_ignores_teammates_moving_apart_and_is_capped():
     )
 
 
-def test_teammates_beyond_range_give_no_rows():
+def test_teammates_out_of_reach_give_no_rows():
     far = rows_for(line([0, 0, 8], [0, 0, 0]), np.zeros((STEPS, 3)), mates([line([30, 0, 8], [0, 0, 0])]))
     assert far.teammate_rows == 0 and far.closest_teammate_m == pytest.approx(30.0)
 
@@ -124,7 +124,7 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
         (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
     )
     path = line([0.0, 1.0, 8.0], [1.0, 0.0, 0.0])
-    unweighted = SeparationParams(obstacle_row_weight=1.0)
+    unweighted = SeparationParams(obstacle_row_weight=1.0, row_reach_m=30.0)
     steps, normals, offsets = obstacle_rows(
         own_path_m=path, obstacles=trunk, own_cov_radius_m=0.2, params=unweighted
     )
@@ -313,3 +313,13 @@ def test_sixteen_mavs_on_the_circle_round_a_trunk_never_touch_it(sixteen_round_a
     xy = sixteen_round_a_trunk.positions_m[..., :2] - TRUNK_ON_THE_CIRCLE.center_m
     clearance = np.sqrt(np.einsum("tki,tki->tk", xy, xy)) - TRUNK_ON_THE_CIRCLE.radius_m
     assert clearance.min() >= 0.5
+
+
+def test_only_rows_within_reach_of_binding_are_built():
+    """Closing head-on from 20 m at 8 m/s: the rows of the early steps, where the pair is still more than
+    row_reach_m from needing them, are left out; the late ones are kept."""
+    a_path, b_path = line([0.0, 0.0, 8.0], [4, 0, 0]), line([20.0, 0.0, 8.0], [-4, 0, 0])
+    rows = rows_for(a_path, np.tile([4.0, 0.0, 0.0], (STEPS, 1)), mates([b_path]))
+    kept = rows.planes.steps
+    assert 0 < kept.size < STEPS - 1 and kept.max() == STEPS - 1
+    assert np.all(np.diff(kept) == 1)  # a contiguous run of the last steps
