@@ -211,27 +211,22 @@ class FormationController:
         rows = self._separation(own, own_path, own_vel, mates, obstacle_set)
         planes = rows.planes if rows is not None and rows.count else None
 
-        sol = self._mpc.solve(
-            position_m=start_p,
-            velocity_mps=start_v,
-            target_position_m=target,
-            target_velocity_mps=target_v,
-            external_inputs_mps2=f_total,
-            half_planes=planes,
-        )
+        def solve(aim_p: np.ndarray, aim_v: np.ndarray) -> MpcSolution:
+            return self._mpc.solve(
+                position_m=start_p,
+                velocity_mps=start_v,
+                target_position_m=aim_p,
+                target_velocity_mps=aim_v,
+                external_inputs_mps2=f_total,
+                half_planes=planes,
+            )
+
+        sol = solve(target, target_v)
         escape = None
         miss = self._imminent_miss(sol, planes)
         if rows is not None and miss > self._params.separation.escape_violation_m:
             escape = f"escape: separation rows of the next steps missed by {miss:.2f} m"
-            target, target_v = self._escape_target(tick, mates, rows)
-            sol = self._mpc.solve(
-                position_m=start_p,
-                velocity_mps=start_v,
-                target_position_m=target,
-                target_velocity_mps=target_v,
-                external_inputs_mps2=f_total,
-                half_planes=planes,
-            )
+            sol = solve(*self._escape_target(tick, mates, rows))
         if not sol.ok:
             return self._brake(
                 tick,

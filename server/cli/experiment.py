@@ -214,19 +214,7 @@ def experiment(
     )
 
     start = time.monotonic()
-    try:
-        with RunProgress(total=len(specs), stream=sys.stderr) as progress:
-            results = exp.run_all(
-                specs, jobs=jobs, out_dir=out, resume=resume, progress=progress, cluster=cluster
-            )
-    except ValueError as err:  # e.g. no scheduler at the cluster address
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(code=2) from None
-    except KeyboardInterrupt:
-        typer.echo(
-            f"\ninterrupted: the finished runs are kept under {out}; add --resume to continue", err=True
-        )
-        raise typer.Exit(code=130) from None
+    results = _run_specs(specs, jobs=jobs, out=out, resume=resume, cluster=cluster)
     wall = time.monotonic() - start
 
     summaries = [rep.summarize(p, results) for p in protocols]
