@@ -9,6 +9,7 @@ from test_closed_loop import STILL_PERSON, min_separation_m, simulate
 
 from controller.fields import ObstacleSet, TeammatePaths
 from controller.messages import Obstacle
+from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
 from controller.params import ControllerParams
 from controller.separation import SeparationParams, braking_room_m, obstacle_rows, separation_rows
 
@@ -204,7 +205,7 @@ def test_without_separation_rows_the_head_on_swap_comes_closer():
 
 
 # ------------------------------------------------------------------------- the QP with these rows (slow)
-def crossing_case(rng: np.random.Generator) -> tuple[dict, object]:
+def crossing_case(rng: np.random.Generator) -> tuple[dict, HalfPlanes]:
     """A tick of a MAV flying at 1-3 teammates that fly at it or across its path, with the rows built from
     both straight-line plans, and a target beyond them: the free plan runs into the cells."""
     own = rng.uniform([-5.0, -5.0, 7.0], [5.0, 5.0, 9.0])
@@ -234,8 +235,6 @@ def separation_qps():
     """60 crossing ticks solved by the exact solver and by CVXPY + OSQP (tight, polished) with the same soft
     rows written out independently (test_qp.cvxpy_mpc_reference)."""
     from test_qp import cvxpy_mpc_reference
-
-    from controller.mpc import ModelPredictiveController, MpcParams
 
     rng = np.random.default_rng(20261129)
     controller = ModelPredictiveController(MpcParams())
