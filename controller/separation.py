@@ -92,15 +92,19 @@ class SeparationParams:
             raise ValueError("SeparationParams: the braking decelerations must be > 0")
 
 
+def row_margins(planes: HalfPlanes, positions_m: np.ndarray) -> np.ndarray:
+    """(R,) a . p(step) - b of every row for plan positions (N+2, 3): >= 0 where the row holds."""
+    normals_z = np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
+    p = positions_m[planes.steps]
+    return np.einsum("ri,ri->r", planes.normals_xy, p[:, :2]) + normals_z * p[:, 2] - planes.offsets
+
+
 def imminent_miss_m(planes: HalfPlanes, positions_m: np.ndarray, *, steps: int) -> float:
     """The largest shortfall (m, >= 0) of plan positions (N+2, 3) from the rows of steps 1..steps."""
     near = planes.steps <= steps
     if not near.any():
         return 0.0
-    normals_z = np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
-    p = positions_m[planes.steps[near]]
-    reach = np.einsum("ri,ri->r", planes.normals_xy[near], p[:, :2]) + normals_z[near] * p[:, 2]
-    return max(0.0, float((planes.offsets[near] - reach).max()))
+    return max(0.0, -float(row_margins(planes, positions_m)[near].min()))
 
 
 @dataclass(frozen=True, eq=False)

@@ -11,7 +11,13 @@ from controller.fields import ObstacleSet, TeammatePaths
 from controller.messages import Obstacle
 from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
 from controller.params import ControllerParams
-from controller.separation import SeparationParams, braking_room_m, obstacle_rows, separation_rows
+from controller.separation import (
+    SeparationParams,
+    braking_room_m,
+    obstacle_rows,
+    row_margins,
+    separation_rows,
+)
 
 PARAMS = SeparationParams()
 DT = 0.1
@@ -48,13 +54,6 @@ def rows_for(own_path, own_vel, team: TeammatePaths, *, inflation=0.0, obstacles
         own_id=own_id,
         params=prm,
     )
-
-
-def margins(rows, positions: np.ndarray) -> np.ndarray:
-    """(R,) a . p(step) - b of every row for positions (S, 3): >= 0 where the row holds."""
-    planes = rows.planes
-    normals = np.column_stack([planes.normals_xy, planes.normals_z])
-    return np.einsum("ri,ri->r", normals, positions[planes.steps]) - planes.offsets
 
 
 # ------------------------------------------------------------------------------------------- the rows
@@ -251,10 +250,8 @@ def separation_qps():
     return out
 
 
-def _active(planes, positions: np.ndarray, tol: float = 1e-6) -> int:
-    normals = np.column_stack([planes.normals_xy, planes.normals_z])
-    slack = np.einsum("ri,ri->r", normals, positions[planes.steps]) - planes.offsets
-    return int(np.count_nonzero(slack <= tol))
+def _active(planes: HalfPlanes, positions: np.ndarray, tol: float = 1e-6) -> int:
+    return int(np.count_nonzero(row_margins(planes, positions) <= tol))
 
 
 @pytest.mark.slow  # 60 QPs through CVXPY: about 5 s
