@@ -12,7 +12,7 @@ controller against a realistic vehicle rather than against its own predictions. 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
 
@@ -229,47 +229,60 @@ def walking_run(team_size: int) -> Run:
     return simulate(team_size=team_size, duration_s=90.0, person=walking_person)
 
 
+@pytest.fixture(scope="module")
+def standing() -> Callable[[int], Run]:
+    """standing_run, shared: tests that take a module fixture stay on one xdist worker (tests/conftest.py),
+    so each run is flown once in the suite, not once per worker that happens to need it."""
+    return standing_run
+
+
+@pytest.fixture(scope="module")
+def walking() -> Callable[[int], Run]:
+    """walking_run, shared as `standing` is."""
+    return walking_run
+
+
 ALL_SIZES = list(range(2, 17))
 WALKING_SIZES = [3, 5, 8, 16]
 
 
 # ------------------------------------------------------------------------------------------------- tests
 @pytest.mark.parametrize("team_size", ALL_SIZES)
-def test_team_around_a_standing_person_converges_well_within_60_s(team_size):
-    run = standing_run(team_size)
+def test_team_around_a_standing_person_converges_well_within_60_s(standing, team_size):
+    run = standing(team_size)
     assert convergence_time_s(run) <= 40.0  # measured 9.5-17.3 s for K = 2..16
     assert spacing_error_deg(run)[-1] < 5.0
     assert distance_error_m(run)[-1] < 0.5 and height_error_m(run)[-1] < 0.3
 
 
 @pytest.mark.parametrize("team_size", ALL_SIZES)
-def test_team_around_a_standing_person_never_comes_closer_than_1_5_m(team_size):
-    run = standing_run(team_size)
+def test_team_around_a_standing_person_never_comes_closer_than_1_5_m(standing, team_size):
+    run = standing(team_size)
     assert min_separation_m(run) >= 1.5  # measured 1.73 m (K = 16) to 2.0 m, checked every tick
     assert min_separation_m(run, horizontal=False) >= min_separation_m(run)
 
 
 @pytest.mark.parametrize("team_size", ALL_SIZES)
-def test_team_around_a_standing_person_solves_every_tick(team_size):
+def test_team_around_a_standing_person_solves_every_tick(standing, team_size):
     """Never a braking plan; escapes (the separation rows cannot all hold) only while the clustered start,
     2 m apart, spreads out: measured up to 6.3 s (K = 16)."""
-    run = standing_run(team_size)
+    run = standing(team_size)
     escaping = run.statuses == SolveStatus.ESCAPE.value
     assert np.all((run.statuses == SolveStatus.SOLVED.value) | escaping)
     assert not escaping[run.times_s > 10.0].any()
 
 
 @pytest.mark.parametrize("team_size", WALKING_SIZES)
-def test_spacing_follows_a_person_walking_at_1_mps(team_size):
-    run = walking_run(team_size)
+def test_spacing_follows_a_person_walking_at_1_mps(walking, team_size):
+    run = walking(team_size)
     last = run.times_s > 60.0
     assert spacing_error_deg(run)[last].max() < 15.0  # measured max 1.0-5.6 deg
     assert distance_error_m(run)[last].max() < 0.6
 
 
 @pytest.mark.parametrize("team_size", WALKING_SIZES)
-def test_team_following_a_walking_person_never_comes_closer_than_1_5_m(team_size):
-    assert min_separation_m(walking_run(team_size)) >= 1.5
+def test_team_following_a_walking_person_never_comes_closer_than_1_5_m(walking, team_size):
+    assert min_separation_m(walking(team_size)) >= 1.5
 
 
 def test_team_converges_at_a_faster_control_rate():

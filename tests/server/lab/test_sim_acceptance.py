@@ -2,10 +2,11 @@
 
 The control rate is 10 Hz here, the MPC's own step (dt = 0.1 s): the controller re-plans every step as at
 100 Hz, only the way-point follower sees set-points less often. At the paper's 100 Hz the same runs take ten
-times longer (see `skyring bench sim` for that rate's speed). Each run is made once per module and shared by
+times longer (see `skyring bench sim` for that rate's speed). Each run is made once in the suite and shared by
 the tests that read its numbers.
 """
 
+from collections.abc import Callable
 from functools import cache
 
 import pytest
@@ -30,46 +31,53 @@ def _paper_run(vehicles: int, comm_loss: float = 0.0) -> dict:
     return run_simulation(config).to_json()["metrics"]
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("k", [3, 5, 8])
-def test_spacing_error_is_at_most_10_degrees(k):
-    assert _paper_run(k)["spacing_error_deg"] <= 10.0
+@pytest.fixture(scope="module")
+def paper_run() -> Callable[..., dict]:
+    """_paper_run, shared: tests that take a module fixture are kept on one xdist worker (tests/conftest.py),
+    so each run is flown once in the suite rather than once per worker."""
+    return _paper_run
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("k", [3, 5, 8])
-def test_distance_error_is_at_most_1_m(k):
-    assert _paper_run(k)["distance_error_m"] <= 1.0
+def test_spacing_error_is_at_most_10_degrees(paper_run, k):
+    assert paper_run(k)["spacing_error_deg"] <= 10.0
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("k", [3, 5, 8])
-def test_the_person_is_in_frame_at_least_90_percent_of_frames(k):
-    assert _paper_run(k)["in_frame_fraction"] >= 0.9
+def test_distance_error_is_at_most_1_m(paper_run, k):
+    assert paper_run(k)["distance_error_m"] <= 1.0
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("k", [3, 5, 8])
-def test_no_two_mavs_come_closer_than_1_5_m(k):
-    assert _paper_run(k)["min_separation_m"] >= 1.5
+def test_the_person_is_in_frame_at_least_90_percent_of_frames(paper_run, k):
+    assert paper_run(k)["in_frame_fraction"] >= 0.9
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("k", [3, 5, 8])
-def test_no_mav_touches_a_trunk(k):
-    assert _paper_run(k)["min_obstacle_clearance_m"] > 0.0
+def test_no_two_mavs_come_closer_than_1_5_m(paper_run, k):
+    assert paper_run(k)["min_separation_m"] >= 1.5
 
 
 @pytest.mark.slow
-def test_with_every_message_lost_the_run_completes_without_collisions():
-    metrics = _paper_run(8, comm_loss=1.0)
+@pytest.mark.parametrize("k", [3, 5, 8])
+def test_no_mav_touches_a_trunk(paper_run, k):
+    assert paper_run(k)["min_obstacle_clearance_m"] > 0.0
+
+
+@pytest.mark.slow
+def test_with_every_message_lost_the_run_completes_without_collisions(paper_run):
+    metrics = paper_run(8, comm_loss=1.0)
     assert metrics["counters"]["messages_delivered"] == 0
     assert metrics["min_separation_m"] >= 1.5
 
 
 @pytest.mark.slow
-def test_with_every_message_lost_each_mav_tracks_with_its_own_detections():
-    vehicles = _paper_run(8, comm_loss=1.0)["vehicles"]
+def test_with_every_message_lost_each_mav_tracks_with_its_own_detections(paper_run):
+    vehicles = paper_run(8, comm_loss=1.0)["vehicles"]
     assert all(v["teammate_detections_fused"] == 0 for v in vehicles)
     assert all(v["own_detections_fused"] > 200 for v in vehicles)
     assert all(v["tracking_error_m_mean"] < 2.0 for v in vehicles)
