@@ -145,16 +145,16 @@ def landing_everyone(live: Live) -> bool:
 
 
 @pytest.mark.parametrize(
-    ("vehicles", "rate_hz", "wait_landed"),
-    [(3, 20.0, True), (16, 10.0, False)],
+    ("vehicles", "rate_hz", "speed", "wait_landed"),
+    [(3, 20.0, 4.0, True), (16, 10.0, 2.0, False)],
     ids=["3-mavs", "16-mavs"],
 )
 def test_land_all_is_reachable_at_every_scroll_position_and_shift_l_lands_everyone(
-    browser, vehicles, rate_hz, wait_landed
+    browser, vehicles, rate_hz, speed, wait_landed
 ):
     """16 MAVs are followed until every one is coming down in its land mode (touching down takes 13 s of
-    simulated time, which 16 MAVs need a minute of this machine for); 3 MAVs until they are on the ground."""
-    speed = 2.0
+    simulated time, which 16 MAVs need a minute of this machine for); 3 MAVs, at four times real time, until
+    they are on the ground."""
     with flying(vehicles=vehicles, speed=speed, rate_hz=rate_hz, trees="paper", seed=11) as live:
         live.wait_for(lambda: all_airborne(live), sim_s=30.0, what="every MAV in the air")
         opened = open_operator(browser, live.urls.operator, viewport=VIEWPORTS[0])
