@@ -63,6 +63,8 @@ import numpy as np
 import pymap3d
 from pymavlink.dialects.v20 import common as mavlink
 
+from vehicles.net.ports import free_port
+
 G_MPS2 = 9.81
 
 # PX4 custom main modes and AUTO sub-modes (px4_custom_mode.h).
@@ -194,10 +196,8 @@ def param_float_as_int(value: float) -> int:
 
 
 def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A UDP port on 127.0.0.1 for a peer or a GCS link (vehicles/net/ports.py says why not bind(0))."""
+    return free_port("udp")
 
 
 class _UdpOut:

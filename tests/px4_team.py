@@ -39,6 +39,7 @@ import numpy as np
 from px4_peer import PeerMode, Px4Peer, free_udp_port
 from pymavlink.dialects.v20 import common as mavlink
 
+from vehicles.net.ports import free_port
 from vehicles.px4.geodesy import GeodeticPoint, geodetic_to_enu
 
 REF = GeodeticPoint(47.397742, 8.545594, 488.0)  # the team origin; the still person stands here
@@ -77,12 +78,6 @@ def ring_homes(k: int = 3, radius_m: float = D_DES_M) -> list[tuple[float, float
         bearing = -math.pi / 2 + 2 * math.pi * i / k
         out.append(home_at(radius_m * math.cos(bearing), radius_m * math.sin(bearing)))
     return out
-
-
-def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @dataclass
@@ -421,7 +416,7 @@ class Station:
     def __init__(self, urls: Sequence[str], *, log_path: Path, extra: Sequence[str] = ()) -> None:
         self.log_path = log_path
         self.out_path = log_path.with_suffix(".out")
-        api_port, viser_port = free_tcp_port(), free_tcp_port()
+        api_port, viser_port = free_port(), free_port()
         self.api = f"http://127.0.0.1:{api_port}"
         cmd = [
             sys.executable,

@@ -11,7 +11,6 @@ each MAV publishes; received is what each MAV's session takes in from its 15 tea
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 
@@ -21,6 +20,7 @@ from controller.messages import Detection, HorizonPlan
 from vehicles.net import wire
 from vehicles.net.guard import Received
 from vehicles.net.keys import agent_key, all_agents_key
+from vehicles.net.ports import free_port
 from vehicles.net.session import Bus, NetConfig
 
 MAVS = 16
@@ -28,21 +28,15 @@ PLAN_HZ = 10.0
 DETECTION_HZ = 4.0
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def run(*, repeats: int) -> None:
     """Publish for repeats / 20 seconds (200 -> 10 s) and print latency and bandwidth."""
     duration_s = max(repeats / 20.0, 2.0)
     team = f"bench{int(time.time())}"
-    hub = f"tcp/127.0.0.1:{_free_port()}"
+    hub = f"tcp/127.0.0.1:{free_port()}"
     member = lambda s: 1 <= s <= MAVS  # noqa: E731
     buses = [Bus(NetConfig(team=team, listen=(hub,), multicast_scouting=False), sender=1, is_member=member)]
     for vid in range(2, MAVS + 1):
-        own = f"tcp/127.0.0.1:{_free_port()}"
+        own = f"tcp/127.0.0.1:{free_port()}"
         config = NetConfig(team=team, connect=(hub,), listen=(own,), multicast_scouting=False)
         buses.append(Bus(config, sender=vid, is_member=member))
     lock = threading.Lock()

@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -27,6 +26,7 @@ from controller.params import ControllerParams, Method
 from server.station.fleet import AgentFleet
 from server.station.ground_station import GroundStation, camera_view
 from vehicles.autopilot import Autopilot
+from vehicles.net.ports import free_port
 from vehicles.net.remote_sim import SimWorldServer
 from vehicles.net.session import Bus, NetConfig
 from vehicles.sim.scenario import Scenario, SeedStreams, build_sim, make_person, make_trees
@@ -37,12 +37,6 @@ log = logging.getLogger(__name__)
 STATION_RATE_HZ = 20.0  # the station's tick: snapshots for the page, the API and the log
 # The station's time runs from 0 at one control period per tick, paced at real time by the live runner (as
 # with PX4 vehicles); the agents' own stamps are UTC.
-
-
-def free_tcp_port(host: str = "127.0.0.1") -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
 
 
 @dataclass
@@ -167,7 +161,7 @@ def build_spawn_station(
     Zenoh over 127.0.0.1 (multicast scouting off; every agent connects to the station's endpoint and to the
     agents started before it). agent_realtime_priority: the agents' `--realtime-priority`."""
     setup = build_sim(Scenario(vehicles=vehicles, seed=seed, method=method, trees=trees, person=person))
-    port = listen_port or free_tcp_port()
+    port = listen_port or free_port()
     station_endpoint = f"tcp/127.0.0.1:{port}"
     config = NetConfig(team=team, listen=(station_endpoint,), multicast_scouting=False)
     bus = Bus(config, sender=0, is_member=lambda s: 1 <= s <= vehicles)
@@ -194,7 +188,7 @@ def build_spawn_station(
         endpoints = [station_endpoint]
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         for a in setup.autopilots:
-            own = f"tcp/127.0.0.1:{free_tcp_port()}"
+            own = f"tcp/127.0.0.1:{free_port()}"
             cmd = agent_command(
                 vehicle_id=a.vehicle_id,
                 team=team,

@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -20,6 +19,7 @@ import numpy as np
 from px4_peer import PeerMode, Px4Peer, free_udp_port
 
 from server.lab.metrics import spacing_error_deg
+from vehicles.net.ports import free_port
 from vehicles.px4.geodesy import GeodeticPoint, geodetic_to_enu
 
 REF = GeodeticPoint(47.397742, 8.545594, 488.0)
@@ -28,12 +28,6 @@ ORIGIN = f"{REF.latitude_deg},{REF.longitude_deg},{REF.altitude_m}"
 # Quick climbs and landings; COM_FAIL_ACT_T stays PX4's 5 s, so an offboard-loss landing starts >= 6 s after
 # the set-points stop (COM_OF_LOSS_T 1 s + 5 s of Hold) and a landing seen sooner came from a command.
 FAST = {"MPC_TKO_SPEED": 3.0, "MPC_LAND_SPEED": 2.0, "COM_DISARM_LAND": 0.5}
-
-
-def free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def ring_home(i: int, k: int) -> tuple[tuple[float, float, float], float]:
@@ -63,7 +57,7 @@ class Team:
     _station_starts: int = 0
 
     def start(self) -> Team:
-        self.station_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+        self.station_endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.agent_udp = [free_udp_port() for _ in range(self.k)]
         self.station_udp = [free_udp_port() for _ in range(self.k)]
         for i in range(self.k):
@@ -79,7 +73,7 @@ class Team:
                 ).start()
             )
         self.start_station()
-        self.agent_ports = [free_tcp_port() for _ in range(self.k)]
+        self.agent_ports = [free_port() for _ in range(self.k)]
         for i in range(self.k):
             self.agents.append(self._spawn_agent(i))
         return self
@@ -100,7 +94,7 @@ class Team:
 
     def start_station(self) -> None:
         self._station_starts += 1
-        api_port = free_tcp_port()
+        api_port = free_port()
         listen = self.station_endpoint
         cmd = [
             sys.executable, "-m", "server.cli", "serve", "--agents", "zenoh", "--team", self.team,
@@ -108,7 +102,7 @@ class Team:
             *[a for p in self.agent_ports for a in ("--connect", f"tcp/127.0.0.1:{p}")],
             "--px4", ",".join(f"udpin://127.0.0.1:{p}" for p in self.station_udp),
             "--origin", ORIGIN, "--trees", "none", "--person", "still",
-            "--host", "127.0.0.1", "--port", str(api_port), "--viser-port", str(free_tcp_port()), "--no-log",
+            "--host", "127.0.0.1", "--port", str(api_port), "--viser-port", str(free_port()), "--no-log",
         ]  # fmt: skip
         self.station = self._popen(cmd, f"station{self._station_starts}")
         self.api = f"http://127.0.0.1:{api_port}"

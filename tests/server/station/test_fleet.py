@@ -4,7 +4,6 @@ from the agents, and the clock offset measured from the heartbeat round trip."""
 
 from __future__ import annotations
 
-import socket
 import sys
 import time
 from pathlib import Path
@@ -21,17 +20,12 @@ from server.station.ground_station import GroundStation, agent_view  # noqa: E40
 from vehicles.mission import MissionError, Phase  # noqa: E402
 from vehicles.net import wire  # noqa: E402
 from vehicles.net.onboard import OnboardAgent, OnboardParams  # noqa: E402
+from vehicles.net.ports import free_port
 from vehicles.net.session import Bus, NetConfig  # noqa: E402
 from webui.cards import AGENT_LOST_FLAG, SKEW_FLAG, vehicle_detail_markdown  # noqa: E402
 
 TEAM = "fleet"
 SKEW_S = 0.2
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_for(condition, timeout_s: float = 10.0) -> float:

@@ -21,18 +21,11 @@ from detect_footage import footage
 from px4_peer import Px4Peer, free_udp_port
 
 from vehicles.detect.calibration import Calibration, mount_rotation
+from vehicles.net.ports import free_port
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 ORIGIN = "47.397742,8.545594,488.0"
-
-
-def _free_tcp_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _vtest_calibration(path) -> None:
@@ -57,7 +50,7 @@ def test_detections_from_skyring_detect_are_fused_by_the_agent_over_zenoh(tmp_pa
     _vtest_calibration(calibration)
     team = f"det{int(time.time() * 1000) % 1_000_000}"
     udp = free_udp_port()
-    agent_port = _free_tcp_port()
+    agent_port = free_port()
     endpoint = f"tcp/127.0.0.1:{agent_port}"
     peer = Px4Peer(gcs_port=udp, system_id=1).start()
     logs = {name: open(tmp_path / f"{name}.log", "w") for name in ("agent", "detect")}  # noqa: SIM115

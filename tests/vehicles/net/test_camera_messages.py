@@ -100,19 +100,16 @@ def test_a_thumbnail_too_large_for_a_message_is_left_out_not_sent_oversized():
 
 
 def test_camera_messages_reach_the_agents_links_and_the_stations_page_over_zenoh():
-    import socket
 
     import viser
 
     from server.station.camera_reports import show_camera_reports
     from vehicles.net.camera_publisher import ZenohCameraSink
+    from vehicles.net.ports import free_port
     from vehicles.net.session import Bus, NetConfig
     from vehicles.net.zenoh_links import ZenohLinks
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    endpoint = f"tcp/127.0.0.1:{port}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     team = f"cam{int(time.time() * 1000) % 1_000_000}"
     agent_bus = Bus(NetConfig(team=team, listen=(endpoint,), multicast_scouting=False), sender=2,
                     is_member=lambda s: 0 <= s <= 3)  # fmt: skip

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import sys
 import time
 from collections.abc import Iterator
@@ -22,6 +21,7 @@ from vehicles.net import wire
 from vehicles.net.guard import Received
 from vehicles.net.keys import agent_key, all_agents_key, station_key
 from vehicles.net.onboard import OnboardAgent, OnboardParams
+from vehicles.net.ports import free_port
 from vehicles.net.realtime import handler_priority, policy
 from vehicles.net.session import Bus, NetConfig
 from vehicles.pilot import Phase
@@ -36,12 +36,6 @@ def ack_of(received: Received) -> wire.AckBody:
     """The acknowledgement a received message carries (anything else on the ack key is a test failure)."""
     assert isinstance(received.body, wire.AckBody), received.body
     return received.body
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @contextlib.contextmanager
