@@ -32,14 +32,15 @@ def ephemeral_low() -> int:
         return DEFAULT_EPHEMERAL_LOW
 
 
-def _binds(kind: str, host: str, port: int) -> bool:
-    family_type = socket.SOCK_STREAM if kind == "tcp" else socket.SOCK_DGRAM
-    with socket.socket(socket.AF_INET, family_type) as s:
+def _bound_port(kind: str, host: str, port: int) -> int | None:
+    """The port a `kind` socket on host gets when it binds `port` (0: the kernel's choice), or None when it
+    cannot bind it; the socket is closed again."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM if kind == "tcp" else socket.SOCK_DGRAM) as s:
         try:
             s.bind((host, port))
         except OSError:
-            return False
-    return True
+            return None
+        return s.getsockname()[1]
 
 
 def free_port(kind: str = "tcp", host: str = "127.0.0.1") -> int:
@@ -52,12 +53,11 @@ def free_port(kind: str = "tcp", host: str = "127.0.0.1") -> int:
     if high - low >= 100:
         for _ in range(ATTEMPTS):
             port = _random.randint(low, high)
-            if (kind, port) not in _given and _binds(kind, host, port):
+            if (kind, port) not in _given and _bound_port(kind, host, port) is not None:
                 _given.add((kind, port))
                 return port
-    family_type = socket.SOCK_STREAM if kind == "tcp" else socket.SOCK_DGRAM
-    with socket.socket(socket.AF_INET, family_type) as s:
-        s.bind((host, 0))
-        port = s.getsockname()[1]
+    port = _bound_port(kind, host, 0)
+    if port is None:
+        raise OSError(f"cannot bind a {kind} socket on {host}")
     _given.add((kind, port))
     return port
