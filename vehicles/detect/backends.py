@@ -20,7 +20,7 @@ import numpy as np
 
 from vehicles.detect.hog import HogParams, HogPeople
 from vehicles.detect.pixels import PersonPixels
-from vehicles.detect.pose import ROI_PX, MediaPipePose, head_and_feet
+from vehicles.detect.pose import ROI_PX, MediaPipePose, PoseEstimate, head_and_feet
 
 BOX_PER_PERSON = 4.0 / 3.0
 """A person box is this many person heights tall (the HOG window's convention: 96 px of person in 128)."""
@@ -37,6 +37,11 @@ where a person walking shoulder to shoulder stands; 0.3-0.4 find the same people
 NEIGHBOUR_HEIGHT_RATIO = 1.25
 """A neighbour found that way is kept only if its height is within this ratio of the person's: side by side
 means at about the same distance; a pose joining one person's head to another's legs is not."""
+
+CANDIDATE_SHIFTS = (0.0, -0.08, 0.08)
+"""Each HOG candidate's crop is given to the pose model at its box and shifted up and down by these many
+box heights, and the most confident pose is kept: where two people overlap, the centred crop can join one's
+head to the other's legs, and a crop that centres either of them better finds that one whole."""
 
 WHOLE_IMAGE_PX = 640
 """The whole-image pass runs on the image shrunk to this longest side (MediaPipe's detector works at 224)."""
@@ -156,15 +161,16 @@ class HogPoseDetector:
         return self._pose
 
     def find(self, image_bgr: np.ndarray) -> list[PersonPixels]:
-        """HOG candidates, each crop given to the landmark model with the people found so far greyed out
-        and tried again after the person it gave is greyed too (two people in one box); then, beside each
-        person found, crops shifted sideways with that person greyed (a neighbour walking shoulder to
-        shoulder, whom HOG merges into one box and the centred crop masks out); then MediaPipe's own
-        detector on the whole image for a person too large or too unusually posed for HOG."""
+        """HOG candidates, each crop (at the box and shifted up and down) given to the landmark model with the
+        people found so far greyed out and tried again after the person it gave is greyed too (two people in
+        one box); then, beside each person found, crops shifted sideways with that person greyed (a
+        neighbour walking shoulder to shoulder, whom HOG merges into one box and the centred crop masks
+        out); then MediaPipe's own detector on the whole image for a person too large or too unusually
+        posed for HOG."""
         found: list[PersonPixels] = []
         for cand in self._hog.find(image_bgr)[: self._max_candidates]:
             for _ in range(2):
-                person = self.refine(image_bgr, cand.box_px, hide=found)
+                person = self._best_of_shifts(image_bgr, cand.box_px, hide=found)
                 if person is None or _duplicate(person, found):
                     break
                 found.append(person)
@@ -188,10 +194,10 @@ class HogPoseDetector:
         """The person in the crop round box_px; people in `hide` are greyed out of the crop first."""
         box = np.asarray(box_px, dtype=float)
         crop, m = make_crop(image_bgr, box, self._crop, hide=hide)
-        marks, presence = self._pose.estimate(crop, mode="roi")
-        if marks is None or presence < self._crop.min_presence:
+        pose = self._pose.estimate(crop, mode="roi")
+        if pose.landmarks is None or pose.presence < self._crop.min_presence:
             return None
-        person = self._person(marks, presence, m)
+        person = self._person(pose, m)
         if person is None:
             return None
         box_h = float(box[3] - box[1]) / BOX_PER_PERSON
@@ -199,22 +205,37 @@ class HogPoseDetector:
             return None  # a person of another size than the one looked for: a neighbour or a false pose
         return person
 
+    def _best_of_shifts(
+        self, image_bgr: np.ndarray, box_px: np.ndarray, *, hide: list[PersonPixels]
+    ) -> PersonPixels | None:
+        """The most confident person of the crops round box_px shifted by CANDIDATE_SHIFTS; the shifted ones
+        are tried only when the first (the box itself) holds a person, as most candidates hold nobody."""
+        height = float(box_px[3] - box_px[1])
+        people: list[PersonPixels] = []
+        for dy in CANDIDATE_SHIFTS:
+            person = self.refine(image_bgr, box_px + np.array([0.0, dy, 0.0, dy]) * height, hide=hide)
+            if person is None and not people:
+                return None
+            if person is not None:
+                people.append(person)
+        return max(people, key=lambda p: p.score)
+
     def _whole_image(self, image_bgr: np.ndarray) -> PersonPixels | None:
         import cv2
 
         h, w = image_bgr.shape[:2]
         k = min(1.0, WHOLE_IMAGE_PX / max(h, w))
         small = cv2.resize(image_bgr, (round(w * k), round(h * k)), interpolation=cv2.INTER_AREA)
-        marks, presence = self._pose.estimate(cv2.cvtColor(small, cv2.COLOR_BGR2RGB), mode="full")
-        if marks is None:
+        pose = self._pose.estimate(cv2.cvtColor(small, cv2.COLOR_BGR2RGB), mode="full")
+        if pose.landmarks is None:
             return None
         m = np.array([[k, 0.0, 0.0], [0.0, k, 0.0]])
-        return self._person(marks, presence, m, method="pose-whole")
+        return self._person(pose, m, method="pose-whole")
 
-    def _person(
-        self, marks: np.ndarray, presence: float, m: np.ndarray, method: str = "pose"
-    ) -> PersonPixels | None:
-        head_c, feet_c, head_conf, feet_conf = head_and_feet(marks)
+    def _person(self, pose: PoseEstimate, m: np.ndarray, method: str = "pose") -> PersonPixels | None:
+        marks = pose.landmarks
+        assert marks is not None
+        head_c, feet_c, head_conf, feet_conf = head_and_feet(marks, pose.mask)
         if min(head_conf, feet_conf) < self._crop.min_points_conf or head_c[1] >= feet_c[1]:
             return None
         head, feet = to_image(head_c, m), to_image(feet_c, m)
@@ -224,7 +245,7 @@ class HogPoseDetector:
             head_conf=head_conf,
             feet_conf=feet_conf,
             box_px=person_box(head, feet),
-            score=presence * float(np.mean(marks[:, 2])),
+            score=pose.presence * float(np.mean(marks[:, 2])),
             method=method,
         )
 

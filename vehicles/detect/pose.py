@@ -6,9 +6,12 @@ does not answer within `timeout_s` is killed and restarted on the next call (cou
 that met it raises PoseWorkerError, so one bad crop costs one frame, never the process.
 
 `head_and_feet` turns MediaPipe's 33 landmarks into the two points skyring measures: the feet point is the
-midpoint of the two feet's soles (heels and toe tips), the head point the crown, which no landmark marks: it
-lies CROWN_ABOVE_EARS times the ears-to-feet distance above the midpoint of the ears (the skull's centre
-seen from any side, where the eyes are off-centre in a side view), along the body's axis (hips to ears).
+midpoint of the two feet's soles (heels and toe tips), the head point the crown, which no landmark marks.
+With the person's segmentation mask (the whole-image mode has one) the crown is read from it: the mask's
+upper edge straight above the midpoint of the ears. Without one it lies CROWN_ABOVE_EARS times the
+ears-to-feet distance above the midpoint of the ears (the skull's centre seen from any side, where the eyes
+are off-centre in a side view), along the body's axis (hips to ears); that proportion fails for a crouching
+or bent-over person and for a full head of hair, which the mask sees.
 Confidences are the landmarks' visibilities: the feet's mean, and for the head the mean of its three most
 visible face landmarks (a head seen from behind shows no face, yet the model places it well).
 """
@@ -21,6 +24,7 @@ import select
 import struct
 import subprocess
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
@@ -44,6 +48,27 @@ view (13 cm over 1.62 m). Fitted (minimum median error) on the 26 people of fram
 vtest.avi frames (tests/vehicles/detect/data/labels.json); on the other 18 the median head error is then
 1.4 px and the 90th percentile 4.6 px, against 3.3 and 7.4 px from the eyes."""
 
+MASK_LEVEL = 0.5
+"""A pixel belongs to the person where the segmentation mask's probability is at least this."""
+
+MASK_SEARCH = 0.35
+"""How far above the ears the mask's edge is looked for, in ears-to-feet distances (about three head
+heights); a mask that runs on further has no edge there (hair against a like-coloured background)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PoseEstimate:
+    """What the pose model found in one image.
+
+    landmarks: (33, 3) x_px, y_px, visibility in [0, 1], or None when it found nobody; presence in [0, 1]:
+    the model's own score that the image holds a person; mask: (H, W) float32 person probability per pixel
+    of the image, or None (only the whole-image mode returns one).
+    """
+
+    landmarks: np.ndarray | None
+    presence: float
+    mask: np.ndarray | None = None
+
 
 class PoseWorkerError(RuntimeError):
     """The pose worker could not be started, died, or did not answer in time."""
@@ -55,9 +80,31 @@ def pose_python() -> Path:
     return Path(env) if env else DEFAULT_POSE_PYTHON
 
 
-def head_and_feet(landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+def crown_from_mask(ears_px: np.ndarray, mask: np.ndarray, search_px: float) -> np.ndarray | None:
+    """(2,) the mask's upper edge straight above ears_px (2,), to half a pixel; None when the ears are not on
+    the mask (H, W), or no edge lies within search_px above them inside the image."""
+    x = float(ears_px[0])
+    ys = float(ears_px[1]) - np.arange(0.0, max(search_px, 0.0), 0.5)
+    h, w = mask.shape
+    ys = ys[ys >= 0.0]
+    if not (0.0 <= x <= w - 1 and ys.size and ys[0] <= h - 1):
+        return None
+    x0, y0 = min(int(x), w - 2), np.minimum(ys.astype(int), h - 2)
+    fx, fy = x - x0, ys - y0
+    top = mask[y0, x0] * (1 - fx) + mask[y0, x0 + 1] * fx
+    bottom = mask[y0 + 1, x0] * (1 - fx) + mask[y0 + 1, x0 + 1] * fx
+    values = top * (1 - fy) + bottom * fy
+    outside = np.flatnonzero(values < MASK_LEVEL)
+    if values[0] < MASK_LEVEL or outside.size == 0:
+        return None
+    return np.array([x, ys[outside[0] - 1]])
+
+
+def head_and_feet(
+    landmarks: np.ndarray, mask: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, float, float]:
     """(head_px (2,), feet_px (2,), head_conf, feet_conf) from MediaPipe landmarks (33, 3) of x_px, y_px,
-    visibility."""
+    visibility, and the person's segmentation mask (H, W) in the same pixels when there is one."""
     xy, vis = landmarks[:, :2], landmarks[:, 2]
     ears = 0.5 * (xy[LEFT_EAR] + xy[RIGHT_EAR])
     hips = 0.5 * (xy[LEFT_HIP] + xy[RIGHT_HIP])
@@ -65,14 +112,17 @@ def head_and_feet(landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray, float,
     norm = float(np.hypot(*up))
     up = up / norm if norm > 1e-6 else np.array([0.0, -1.0])
     feet = xy[[LEFT_HEEL, RIGHT_HEEL, LEFT_TOE, RIGHT_TOE]].mean(axis=0)
-    head = ears + CROWN_ABOVE_EARS * float(np.hypot(*(feet - ears))) * up
+    ears_to_feet = float(np.hypot(*(feet - ears)))
+    head = None if mask is None else crown_from_mask(ears, mask, MASK_SEARCH * ears_to_feet)
+    if head is None:
+        head = ears + CROWN_ABOVE_EARS * ears_to_feet * up
     head_conf = float(np.mean(np.sort(vis[: MOUTH_RIGHT + 1])[-3:]))
     feet_conf = float(np.mean(vis[[LEFT_HEEL, RIGHT_HEEL, LEFT_TOE, RIGHT_TOE]]))
     return head, feet, min(max(head_conf, 0.0), 1.0), min(max(feet_conf, 0.0), 1.0)
 
 
 class MediaPipePose:
-    """A pose-landmark estimator in a child process: `estimate(crop)` -> (landmarks or None, presence)."""
+    """A pose-landmark estimator in a child process: `estimate(image)` -> PoseEstimate."""
 
     def __init__(
         self, *, python: Path | None = None, timeout_s: float = 5.0, start_timeout_s: float = 60.0
@@ -111,12 +161,12 @@ class MediaPipePose:
             self._fail("the pose worker did not report ready")
         self.version = str(hello.get("mediapipe", ""))
 
-    def estimate(self, crop_rgb: np.ndarray, *, mode: str = "roi") -> tuple[np.ndarray | None, float]:
-        """(landmarks (33, 3): x_px, y_px in the crop, visibility in [0, 1]; or None), presence in [0, 1].
+    def estimate(self, crop_rgb: np.ndarray, *, mode: str = "roi") -> PoseEstimate:
+        """The person in crop_rgb, (H, W, 3) uint8 RGB, landmarks in its pixels.
 
-        crop_rgb: (H, W, 3) uint8 RGB. mode "roi": the landmark model on this crop as its region of interest
-        (it must be ROI_PX square; the person centred, about 3/4 of its height); "full": MediaPipe's person
-        detector first, on any image (presence is then 1 or 0).
+        mode "roi": the landmark model on this crop as its region of interest (it must be ROI_PX square; the
+        person centred, about 3/4 of its height); "full": MediaPipe's person detector first, on any image
+        (presence is then 1 or 0), with the person's segmentation mask.
         """
         image = np.ascontiguousarray(crop_rgb, dtype=np.uint8)
         if image.ndim != 3 or image.shape[2] != 3:
@@ -140,32 +190,43 @@ class MediaPipePose:
             raise ValueError(f"the pose worker refused the request: {reply['error']}")
         self.last_ms = float(reply.get("ms", float("nan")))
         marks = reply.get("landmarks")
-        presence = float(reply.get("presence", 0.0))
-        return (None if marks is None else np.asarray(marks, dtype=float).reshape(33, 3)), presence
+        return PoseEstimate(
+            landmarks=None if marks is None else np.asarray(marks, dtype=float).reshape(33, 3),
+            presence=float(reply.get("presence", 0.0)),
+            mask=reply.get("mask_array"),
+        )
 
     def _reply(self, timeout_s: float) -> dict:
+        """The worker's next reply; a mask that follows it is read too, as "mask_array" (H, W) in [0, 1]."""
+        (length,) = struct.unpack("<I", self._read(4, timeout_s))
+        data = self._read(length, timeout_s)
+        try:
+            reply = json.loads(data)
+            shape = tuple(int(n) for n in reply.get("mask", ()))
+        except (json.JSONDecodeError, TypeError, ValueError):
+            self._fail("the pose worker sent a malformed reply")
+            raise  # unreachable: _fail raises
+        if len(shape) == 2:
+            raw = self._read(shape[0] * shape[1], timeout_s)
+            reply["mask_array"] = np.frombuffer(raw, dtype=np.uint8).reshape(shape).astype(np.float32) / 255.0
+        return reply
+
+    def _read(self, n: int, timeout_s: float) -> bytes:
         proc = self._proc
         assert proc is not None and proc.stdout is not None
         fd = proc.stdout.fileno()
-        data = b""
-        need = 4
-        length: int | None = None
-        while len(data) < need:
+        chunks: list[bytes] = []
+        missing = n
+        while missing > 0:
             ready, _, _ = select.select([fd], [], [], timeout_s)
             if not ready:
                 self._fail(f"the pose worker did not answer within {timeout_s:.1f} s")
-            chunk = os.read(fd, need - len(data))
+            chunk = os.read(fd, missing)
             if not chunk:
                 self._fail("the pose worker exited")
-            data += chunk
-            if length is None and len(data) == 4:
-                (length,) = struct.unpack("<I", data)
-                data, need = b"", length
-        try:
-            return json.loads(data)
-        except json.JSONDecodeError:
-            self._fail("the pose worker sent a malformed reply")
-            raise  # unreachable: _fail raises
+            chunks.append(chunk)
+            missing -= len(chunk)
+        return b"".join(chunks)
 
     def _fail(self, why: str) -> None:
         tail = self._log_tail()

@@ -12,13 +12,15 @@ Two modes per request:
   is found too. Input 256 x 256 RGB in [0, 1]; output 39 landmarks of (x, y, z, visibility logit, presence
   logit) in crop pixels, the first 33 the body's, and a pose-presence score.
 - "full": MediaPipe's pose solution (its face-anchored person detector, then the same landmark model) on a
-  whole image, for a large person that no box was found for.
+  whole image, for a large person that no box was found for; with the person's segmentation mask, from
+  which skyring reads the crown (vehicles/detect/pose.py).
 
 Protocol (binary, little-endian), one request at a time:
   request:  u32 header length, header JSON {"w": int, "h": int, "mode": "roi"|"full"}, then w * h * 3 bytes
             of RGB pixels ("roi" needs w = h = 256)
   reply:    u32 length, JSON {"landmarks": [[x_px, y_px, visibility] * 33] or null, "presence": float,
-            "ms": float} (or {"error": text})
+            "ms": float} (or {"error": text}); in "full" mode with a person, the JSON also holds
+            "mask": [h, w] and h * w bytes follow it: the person's segmentation, probability x 255
 At start the worker replies once with {"ready": true, "mediapipe": version}. A header with "w": 0 ends it.
 """
 
@@ -32,9 +34,9 @@ import time
 ROI_PX = 256
 
 
-def _send(out, obj: dict) -> None:
+def _send(out, obj: dict, tail: bytes = b"") -> None:
     data = json.dumps(obj).encode()
-    out.write(struct.pack("<I", len(data)) + data)
+    out.write(struct.pack("<I", len(data)) + data + tail)
     out.flush()
 
 
@@ -87,7 +89,7 @@ def main() -> int:
     )
     roi = RoiLandmarks(model)
     full = mp.solutions.pose.Pose(
-        static_image_mode=True, model_complexity=1, enable_segmentation=False, min_detection_confidence=0.3
+        static_image_mode=True, model_complexity=1, enable_segmentation=True, min_detection_confidence=0.3
     )
     _send(out, {"ready": True, "mediapipe": mp.__version__})
     while True:
@@ -101,6 +103,8 @@ def main() -> int:
         except EOFError:
             return 0
         t0 = time.perf_counter()
+        reply: dict[str, object] = {}
+        tail = b""
         if mode == "roi":
             if w != ROI_PX or h != ROI_PX:
                 _send(out, {"error": f"roi mode needs a {ROI_PX} x {ROI_PX} crop, got {w} x {h}"})
@@ -113,7 +117,10 @@ def main() -> int:
             else:
                 marks = [[lm.x * w, lm.y * h, lm.visibility] for lm in result.pose_landmarks.landmark]
                 presence = 1.0
-        _send(out, {"landmarks": marks, "presence": presence, "ms": (time.perf_counter() - t0) * 1e3})
+                mask = np.clip(np.asarray(result.segmentation_mask) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+                reply["mask"], tail = list(mask.shape), mask.tobytes()
+        reply.update(landmarks=marks, presence=presence, ms=(time.perf_counter() - t0) * 1e3)
+        _send(out, reply, tail)
 
 
 if __name__ == "__main__":

@@ -22,16 +22,16 @@ def _crop() -> np.ndarray:
 
 
 def test_landmarks_of_a_real_person_are_found_in_the_crop(pose_model):
-    marks, presence = pose_model.estimate(_crop())
-    assert marks is not None and marks.shape == (33, 3) and presence > 0.9
+    pose = pose_model.estimate(_crop())
+    marks = pose.landmarks
+    assert marks is not None and marks.shape == (33, 3) and pose.presence > 0.9 and pose.mask is None
     head, feet, head_conf, feet_conf = head_and_feet(marks)
     assert head[1] < feet[1] and 0.0 < head_conf <= 1.0 and 0.0 < feet_conf <= 1.0
     assert 0.0 <= head[0] <= ROI_PX and 0.0 <= feet[1] <= ROI_PX
 
 
 def test_an_empty_crop_holds_nobody(pose_model):
-    marks, presence = pose_model.estimate(np.full((ROI_PX, ROI_PX, 3), 128, np.uint8))
-    assert presence < 0.5
+    assert pose_model.estimate(np.full((ROI_PX, ROI_PX, 3), 128, np.uint8)).presence < 0.5
 
 
 def test_a_crop_of_the_wrong_size_is_refused_before_it_is_sent(pose_model):
@@ -51,11 +51,21 @@ def test_a_killed_worker_fails_one_call_and_is_restarted_by_the_next():
         with pytest.raises(PoseWorkerError, match="exited|closed"):
             model.estimate(_crop())
         assert model.restarts == 1
-        marks, presence = model.estimate(_crop())
-        assert marks is not None and presence > 0.9
+        pose = model.estimate(_crop())
+        assert pose.landmarks is not None and pose.presence > 0.9
 
 
 def test_a_missing_pose_environment_is_a_clear_error(tmp_path):
     model = MediaPipePose(python=tmp_path / "nope" / "python")
     with pytest.raises(PoseWorkerError, match="make pose-env"):
         model.start()
+
+
+def test_the_whole_image_mode_returns_the_person_and_its_mask(pose_model):
+    image = read_frame("messi5.jpg", None)
+    pose = pose_model.estimate(image[:, :, ::-1].copy(), mode="full")
+    assert pose.landmarks is not None and pose.presence == 1.0
+    assert pose.mask is not None and pose.mask.shape == image.shape[:2]
+    nose = pose.landmarks[0, :2].round().astype(int)
+    assert pose.mask[nose[1], nose[0]] > 0.9  # the face is on the person
+    assert pose.mask[5, 5] < 0.1 and pose.mask[-5, -5] < 0.1  # the crowd and the pitch are not
