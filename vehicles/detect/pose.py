@@ -42,6 +42,9 @@ LEFT_HEEL, RIGHT_HEEL, LEFT_TOE, RIGHT_TOE = 29, 30, 31, 32
 ROI_PX = 256
 """Side of the square crop the landmark model takes in "roi" mode."""
 
+MAX_MASK_PIXELS = 4096 * 4096
+"""The largest segmentation mask a reply may announce (the whole-image pass sends one of its shrunk image)."""
+
 CROWN_ABOVE_EARS = 0.090
 """Crown above the ears' midpoint, in ears-to-feet distances. Anthropometry gives about 0.08 for a level
 view (13 cm over 1.62 m). Fitted (minimum median error) on the 26 people of frames 80-320 of the labelled
@@ -156,7 +159,7 @@ class MediaPipePose:
             env=env,
             cwd=str(WORKER.parent),
         )
-        hello = self._reply(self._start_timeout_s)
+        hello, _ = self._reply(self._start_timeout_s)
         if not hello.get("ready"):
             self._fail("the pose worker did not report ready")
         self.version = str(hello.get("mediapipe", ""))
@@ -185,7 +188,7 @@ class MediaPipePose:
             proc.stdin.flush()
         except (BrokenPipeError, OSError):
             self._fail("the pose worker's input closed")
-        reply = self._reply(self._timeout_s)
+        reply, mask = self._reply(self._timeout_s)
         if "error" in reply:
             raise ValueError(f"the pose worker refused the request: {reply['error']}")
         self.last_ms = float(reply.get("ms", float("nan")))
@@ -193,23 +196,25 @@ class MediaPipePose:
         return PoseEstimate(
             landmarks=None if marks is None else np.asarray(marks, dtype=float).reshape(33, 3),
             presence=float(reply.get("presence", 0.0)),
-            mask=reply.get("mask_array"),
+            mask=mask,
         )
 
-    def _reply(self, timeout_s: float) -> dict:
-        """The worker's next reply; a mask that follows it is read too, as "mask_array" (H, W) in [0, 1]."""
+    def _reply(self, timeout_s: float) -> tuple[dict, np.ndarray | None]:
+        """The worker's next reply, and the mask (H, W) in [0, 1] that follows when it says "mask": [H, W]."""
         (length,) = struct.unpack("<I", self._read(4, timeout_s))
         data = self._read(length, timeout_s)
         try:
             reply = json.loads(data)
             shape = tuple(int(n) for n in reply.get("mask", ()))
-        except (json.JSONDecodeError, TypeError, ValueError):
+        except (json.JSONDecodeError, AttributeError, TypeError, ValueError):
             self._fail("the pose worker sent a malformed reply")
             raise  # unreachable: _fail raises
-        if len(shape) == 2:
-            raw = self._read(shape[0] * shape[1], timeout_s)
-            reply["mask_array"] = np.frombuffer(raw, dtype=np.uint8).reshape(shape).astype(np.float32) / 255.0
-        return reply
+        if not shape:
+            return reply, None
+        if len(shape) != 2 or not 0 < shape[0] * shape[1] <= MAX_MASK_PIXELS or min(shape) <= 0:
+            self._fail(f"the pose worker announced a mask of shape {shape}")
+        raw = self._read(shape[0] * shape[1], timeout_s)
+        return reply, np.frombuffer(raw, dtype=np.uint8).reshape(shape).astype(np.float32) / 255.0
 
     def _read(self, n: int, timeout_s: float) -> bytes:
         proc = self._proc

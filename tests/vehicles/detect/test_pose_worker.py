@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -69,3 +70,31 @@ def test_the_whole_image_mode_returns_the_person_and_its_mask(pose_model):
     nose = pose.landmarks[0, :2].round().astype(int)
     assert pose.mask[nose[1], nose[0]] > 0.9  # the face is on the person
     assert pose.mask[5, 5] < 0.1 and pose.mask[-5, -5] < 0.1  # the crowd and the pitch are not
+
+
+def test_a_reply_announcing_an_impossible_mask_fails_the_call(tmp_path, monkeypatch):
+    """A worker (here a stand-in script) whose reply promises a mask of a negative size is treated as broken:
+    the call fails with PoseWorkerError and the worker is counted as restarted, never read from further."""
+    import sys
+
+    import vehicles.detect.pose as pose
+
+    script = tmp_path / "liar.py"
+    script.write_text(
+        "import json, struct, sys\n"
+        "def send(obj):\n"
+        "    data = json.dumps(obj).encode()\n"
+        "    sys.stdout.buffer.write(struct.pack('<I', len(data)) + data)\n"
+        "    sys.stdout.buffer.flush()\n"
+        "send({'ready': True, 'mediapipe': 'stand-in'})\n"
+        "n = struct.unpack('<I', sys.stdin.buffer.read(4))[0]\n"
+        "header = json.loads(sys.stdin.buffer.read(n))\n"
+        "sys.stdin.buffer.read(header['w'] * header['h'] * 3)\n"
+        "send({'landmarks': None, 'presence': 0.0, 'ms': 0.0, 'mask': [-4, 5]})\n"
+        "sys.stdin.buffer.read()\n"
+    )
+    monkeypatch.setattr(pose, "WORKER", script)
+    with MediaPipePose(python=Path(sys.executable), timeout_s=5.0) as model:
+        with pytest.raises(PoseWorkerError, match="mask of shape"):
+            model.estimate(np.zeros((64, 64, 3), np.uint8), mode="full")
+        assert model.restarts == 1
