@@ -476,3 +476,21 @@ def test_half_plane_step_outside_the_horizon_raises():
         ModelPredictiveController(MpcParams()).solve(
             **flight_case(np.random.default_rng(6)), half_planes=planes
         )
+
+
+def test_a_row_the_first_working_set_leaves_out_joins_when_the_answer_misses_it():
+    """Two coupling rows on min |x - (10, 10)|^2 / 2: the unconstrained optimum misses only y <= 0; with that
+    row alone the answer (10, 0) misses x - y <= 5, which met the unconstrained optimum; with both the optimum
+    is their corner (5, 0)."""
+    qp = ExactQp(np.eye(2), np.array([[1.0, 0.0]]), np.zeros(2, dtype=bool))  # a fixed row x >= -100, slack
+    extra_a = np.array([[0.0, 1.0], [1.0, -1.0]])
+    result = qp.solve(
+        np.array([-10.0, -10.0]),
+        np.array([-100.0]),
+        np.array([np.inf]),
+        extra_a,
+        np.full(2, -np.inf),
+        np.array([0.0, 5.0]),
+    )
+    assert result.status == "solved" and result.path == "active_set"
+    np.testing.assert_allclose(result.x, [5.0, 0.0], atol=1e-9)
