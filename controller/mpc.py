@@ -34,7 +34,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from controller.mpc_kernels import CLOSED_FORM, INVALID, NEEDS_SOLVER, rollout, solve_fast
+from controller.mpc_kernels import CLOSED_FORM, INVALID, NEEDS_SOLVER, half_plane_rows, rollout, solve_fast
 from controller.qp import ExactQp
 
 EFFORT_MODES = ("hover", "planned", "raw")
@@ -467,7 +467,7 @@ class ModelPredictiveController:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, l, u from x(0) (6,), the terminal reference (6,) and f (M, 3); h (6M,) is the free response."""
         prm = self._params
-        free = self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
+        free = self._free_response(x0, f)
         if prm.effort == "hover":
             offset = np.tile(self._g, self._n_steps)
         elif prm.effort == "planned":
@@ -523,8 +523,7 @@ class ModelPredictiveController:
         position rows of the input-to-state map at step n, h the free response, w the shared slack (last
         variable; a hard row has 0 there). Returns (rows (R, n), lower (R,), upper (R,))."""
         steps, normals, offsets, soft = planes
-        x0 = np.concatenate([position, velocity])
-        free = self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
+        free = self._free_response(np.concatenate([position, velocity]), f)
         first = 6 * (steps - 1)  # the x row of step n in the stacked states; y, z are the next two
         rows = np.zeros((len(steps), self._n_exact))
         rows[:, : self._nu] = (
@@ -537,6 +536,21 @@ class ModelPredictiveController:
             normals[:, 0] * free[first] + normals[:, 1] * free[first + 1] + normals[:, 2] * free[first + 2]
         )
         return rows, lower, np.full(len(steps), np.inf)
+
+    def _free_response(self, x0: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """(6(N+1),) the stacked states with no input, from x(0) (6,) under f (N+1, 3) and gravity."""
+        return self._free_x0 @ x0 + self._input_to_state @ (f + self._g).ravel()
+
+    def _half_plane_rows_compiled(
+        self, planes: Planes, position: np.ndarray, velocity: np.ndarray, f: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`_half_plane_rows` by the compiled kernel (mpc_kernels.half_plane_rows): the same bits."""
+        steps, normals, offsets, soft = planes
+        count = len(steps)
+        rows, lower = np.zeros((count, self._n_exact)), np.empty(count)
+        free = self._free_response(np.concatenate([position, velocity]), f)
+        half_plane_rows(self._input_to_state, free, steps, normals, offsets, soft, rows, lower)
+        return rows, lower, np.full(count, np.inf)
 
     def _solve_exact(
         self,
@@ -610,7 +624,7 @@ class ModelPredictiveController:
         if half_planes is not None:
             if not (np.all(np.isfinite(half_planes[1])) and np.all(np.isfinite(half_planes[2]))):
                 return None
-            extra = self._half_plane_rows(half_planes, position_m, velocity_mps, f)
+            extra = self._half_plane_rows_compiled(half_planes, position_m, velocity_mps, f)
             if verdict == CLOSED_FORM and (extra[0] @ z < extra[1] - 1e-9).any():
                 verdict, fixed_rows_ok = NEEDS_SOLVER, True
         path, iterations, time_s = "closed_form", 0, 0.0

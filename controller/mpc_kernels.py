@@ -1,8 +1,10 @@
-"""The MPC's per-solve arithmetic as compiled kernels (numba): the condensed QP's vectors and the rollout.
+"""The MPC's per-solve arithmetic as compiled kernels (numba): the condensed QP's vectors, the rollout, and
+the half-planes' rows.
 
-`mpc.py` keeps the readable numpy form of both (`ModelPredictiveController._solve_vectors`, `predict`); these
-compute the same numbers in one pass each without numpy's per-call overhead, and tests/controller/test_mpc.py
-checks them against it. Compiled code is cached on disk (`cache=True`): only the first start compiles.
+`mpc.py` keeps the readable numpy form of each (`ModelPredictiveController._solve_vectors`, `predict`,
+`_half_plane_rows`); these compute the same numbers in one pass each without numpy's per-call overhead, and
+tests/controller/test_mpc.py checks them against it. Compiled code is cached on disk (`cache=True`): only the
+first start compiles.
 """
 
 from __future__ import annotations
@@ -212,3 +214,31 @@ def solve_fast(
         velocities,
     )
     return CLOSED_FORM, violation
+
+
+@numba.njit(cache=True)
+def half_plane_rows(
+    input_to_state: np.ndarray,
+    free: np.ndarray,
+    steps: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    soft: np.ndarray,
+    rows: np.ndarray,
+    lower: np.ndarray,
+) -> None:  # pragma: no cover - compiled; tested against ModelPredictiveController._half_plane_rows
+    """Write the half-planes' rows (R, n) and lower bounds (R,) of the exact QP, as `_half_plane_rows`: row r
+    is a^T G_p(n) on the inputs and soft_r on the last variable, its bound b - a^T h_p(n); input_to_state
+    (6(N+1), 3(N+1)), free (6(N+1),) the free response, steps (R,) in 1..N+1, normals (R, 3). rows must be
+    zero beyond the inputs and the last column. Same order of operations as the numpy form: same bits."""
+    nu = input_to_state.shape[1]
+    last = rows.shape[1] - 1
+    for r in range(steps.shape[0]):
+        first = 6 * (steps[r] - 1)
+        ax, ay, az = normals[r, 0], normals[r, 1], normals[r, 2]
+        for j in range(nu):
+            rows[r, j] = (
+                ax * input_to_state[first, j] + ay * input_to_state[first + 1, j]
+            ) + az * input_to_state[first + 2, j]
+        rows[r, last] = soft[r]
+        lower[r] = offsets[r] - ((ax * free[first] + ay * free[first + 1]) + az * free[first + 2])

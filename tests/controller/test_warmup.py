@@ -12,6 +12,7 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         fields_kernel._kernel,
         mpc_kernels.solve_fast,
         mpc_kernels.rollout,
+        mpc_kernels.half_plane_rows,
         teammates.align_rows,
         tracker._predicted,
     )
