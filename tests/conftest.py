@@ -37,12 +37,12 @@ FIRST_MARKS = ("slow", "browser", "e2e")
 # The longest units, longest first (wall seconds of each on the 2-core machine under `make test`'s load):
 # a group's name (module::fixture) or a nodeid prefix.
 LONGEST = (
+    "tests/server/lab/test_experiments.py::quick_all",  # 140-150 s (2026-11-30): `experiment all --quick`
     "tests/webui/test_agents_spawn.py::spawned",  # 150-170 s: the 60 s rehearsal, web load, a browser
     "tests/webui/test_browser.py::live",  # 130-150 s: a live station and eleven browser tests
-    "tests/server/lab/test_experiments.py::ordering",  # 50-130 s: 21 runs of 45 s on two processes
+    "tests/server/lab/test_experiments.py::ordering",  # 95-110 s (2026-11-30): 21 runs of 45 s, 2 processes
     "tests/webui/test_browser_security.py::secured_live",  # 110 s
-    "tests/webui/test_operator_page.py::test_land_all_is_reachable",  # 75-100 s each, 3 and 16 MAVs
-    "tests/server/lab/test_experiments.py::quick_all",  # 55-80 s: `skyring experiment all --quick` and more
+    "tests/webui/test_operator_page.py::test_land_all_is_reachable",  # 45-55 s each, 3 and 16 MAVs
     "tests/webui/test_operator_page.py::alert_live",  # 40 s
 )
 
