@@ -73,7 +73,8 @@ class ControllerStats:
     dropped for non-finite numbers (or a plan carrying our own id); rejected_inputs: ticks whose own state,
     person estimate, time or formation parameters were not usable; field_faults: non-finite external-input
     totals replaced by zero; ignored_bearings: non-finite preferred bearings ignored; escapes: of the solved
-    ticks, those whose separation rows could not all hold, flown as an escape (docs/safety.md).
+    ticks, those whose separation rows could not all hold, flown as an escape (docs/safety.md); holds: of the
+    solved ticks, those asked to hold (a teammate unheard too long: vehicles/agent.py).
     """
 
     ticks: int = 0
@@ -86,6 +87,7 @@ class ControllerStats:
     field_faults: int = 0
     ignored_bearings: int = 0
     escapes: int = 0
+    holds: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,6 +176,7 @@ class FormationController:
         formation: FormationParams,
         in_formation: bool = True,
         preferred_bearing_rad: float | None = None,
+        hold: bool = False,
     ) -> ControlOutput:
         """Plan one control tick at now_s (s, the caller's clock); return the plan and the way-point.
 
@@ -183,7 +186,9 @@ class FormationController:
         for a MAV that left formation control (its plan says so; it neither spaces itself nor steers its
         approach angle); preferred_bearing_rad: when given, the terminal reference lies at this ENU bearing
         about the person (the roster slot 2 pi k / K of a MAV without fresh teammate information) instead of
-        at the current bearing.
+        at the current bearing; hold: rest where it is, at h_des above the person, on a plan without the
+        external inputs (whose pushes a silent teammate could not foresee), keeping the separation rows of
+        what it is given (the agent gives no teammates: vehicles/agent.py), and no escape (the hold is one).
         """
         self._counts["ticks"] += 1
         start_p, start_v = self._start_state(now_s, own)
@@ -203,11 +208,14 @@ class FormationController:
         obstacle_set = self._obstacles(obstacles)
         mates = self._teammates(teammates, now_s, own)
         own_path, own_vel = self._own_horizon(tick)
-        if price:
+        if price or hold:
             f_total = np.zeros((self._steps, 3))
         else:
             f_total = self._inputs(tick, person, mates, obstacle_set, formation, own_path, own_vel)
-        target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
+        if hold:
+            target, target_v = self._hold_target(tick, person, formation)
+        else:
+            target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
         rows = self._separation(own, own_path, own_vel, mates, obstacle_set)
         planes = rows.planes if rows is not None and rows.count else None
 
@@ -224,7 +232,7 @@ class FormationController:
         sol = solve(target, target_v)
         escape = None
         miss = self._imminent_miss(sol, planes)
-        if rows is not None and miss > self._params.separation.escape_violation_m:
+        if not hold and rows is not None and miss > self._params.separation.escape_violation_m:
             escape = f"escape: separation rows of the next steps missed by {miss:.2f} m"
             sol = solve(*self._escape_target(tick, mates, rows))
         if not sol.ok:
@@ -263,13 +271,16 @@ class FormationController:
         self._counts["solved"] += 1
         if escape is not None:
             self._counts["escapes"] += 1
+        if hold:
+            self._counts["holds"] += 1
+        status = SolveStatus.HOLD if hold else SolveStatus.SOLVED if escape is None else SolveStatus.ESCAPE
         yaw = bearing_rad(from_m=wp_p, to_m=np.asarray(person.position_m, dtype=float))
         return ControlOutput(
             plan=plan,
             waypoint_position_m=wp_p,
             waypoint_velocity_mps=wp_v,
             yaw_rad=yaw,
-            status=SolveStatus.SOLVED if escape is None else SolveStatus.ESCAPE,
+            status=status,
             external_inputs=f_total,
             fault=escape,
             solver_iterations=sol.iterations,
@@ -473,6 +484,15 @@ class FormationController:
             if math.hypot(gap[0], gap[1]) < self._params.separation.separation_m:
                 climb = self._params.separation.escape_climb_m
                 target[2] = mate[2] + (climb if gap[2] >= 0.0 else -climb)
+        return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
+
+    def _hold_target(
+        self, tick: _Tick, person: PersonEstimate, formation: FormationParams
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where a hold aims: rest at the start position, at h_des above the person, inside the arena."""
+        mp = self._mpc_params
+        target = tick.start_p.copy()
+        target[2] = float(person.position_m[2]) + formation.h_des_m
         return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
 
     def _previous_plan_on_horizon(self, now_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -189,6 +189,11 @@ class TeammateTable:
         self._in_formation[row] = plan.in_formation
         return "stored"
 
+    def ids_since(self, since_s: float) -> set[int]:
+        """Vehicle ids of the plans stamped at or after since_s, in formation or not."""
+        n = self._count
+        return set(self._row_ids[:n][self._stamps[:n] >= since_s].tolist())
+
     def fresh_count(self, since_s: float, *, in_formation: bool = True) -> int:
         """How many stored plans are stamped at or after since_s (only in-formation ones by default)."""
         n = self._count

@@ -6,10 +6,14 @@ return the set-point (position, velocity, yaw) plus the messages to broadcast (i
 its detections at once). No clocks, no I/O: the deterministic simulation and the live ground station drive the
 same `tick(now_s, inputs) -> outputs`.
 
-Communication loss: a teammate's plan is forgotten after `teammate_timeout_s`; an unheard teammate is stood in
+Communication loss: a MAV that has not heard a teammate of the roster for `blind_after_s` *holds*: it rests
+where it is, at the formation height, facing the person, until it has heard every one within
+`resume_within_s` (docs/safety.md#link-loss-the-hold). MAVs that cannot hear each other are kept apart by
+not moving: moving ones are not predictable. While a roster teammate is not in formation (taking off, or
+holding), or unheard with holds off (`blind_after_s` = 0, the paper's MAVs flying on blind), it is stood in
 for by a *phantom* plan at its roster slot (2 pi k / K about this MAV's person estimate, moving with the
-person), and this MAV aims at its own slot, so a team that cannot talk still spreads out
-(docs/method.md#beyond-the-paper-the-team-without-its-links).
+person), and this MAV aims at its own slot (docs/method.md#beyond-the-paper-the-team-without-its-links). A
+teammate's plan is forgotten after `teammate_timeout_s`.
 
 Re-planning rate: by default the MPC is solved every control tick, as in the paper. With `replan_period_s`
 > 0 it is solved at most that often; in between, the set-point follows the latest plan (its state
@@ -64,12 +68,19 @@ class AgentParams:
     than this is forgotten (it is then neither avoided nor spaced around); search_yaw_rate_radps: how fast a
     MAV that lost the person turns on the spot to look for it (0.5 rad/s: a full turn in 12.6 s, slow enough
     for the 4 Hz detector to see the person in several frames of each turn); replan_period_s: 0 solves the MPC
-    every tick (the paper), > 0 at most this often (see the module docstring)."""
+    every tick (the paper), > 0 at most this often (see the module docstring); blind_after_s: a roster
+    teammate unheard for longer makes this MAV hold (0: never hold). 1.5 s is 15 lost plans in a row: at any
+    moment, with 25 % link loss a chance of 1e-9 per teammate, with 90 % loss 0.21 (docs/safety.md);
+    resume_within_s: the hold ends (and formation flight first begins) once every roster teammate has been
+    heard within this long: the age up to which the separation rows trust a teammate to hold its own
+    (SeparationParams.cooperative_age_s)."""
 
     plan_period_s: float = 0.1
     teammate_timeout_s: float = 3.0
     search_yaw_rate_radps: float = 0.5
     replan_period_s: float = 0.0
+    blind_after_s: float = 1.5
+    resume_within_s: float = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,8 +112,8 @@ class AgentCounters:
     """Cumulative counts: detections fused from the own camera and from teammates, plans received,
     messages rejected (malformed, own echoes, camera detections without a converter), controller exceptions
     caught, braking ticks, escape ticks (separation rows that could not all hold: controller/separation.py),
-    ticks that used the roster slot. The camera converter keeps its own counts
-    (`AgentOutputs.camera`)."""
+    ticks that used the roster slot, ticks held because a roster teammate was unheard (hold_ticks). The
+    camera converter keeps its own counts (`AgentOutputs.camera`)."""
 
     own_detections_fused: int = 0
     teammate_detections_fused: int = 0
@@ -112,6 +123,7 @@ class AgentCounters:
     braking_ticks: int = 0
     escape_ticks: int = 0
     slot_ticks: int = 0
+    hold_ticks: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,6 +202,7 @@ class Agent:
         self._search: tuple[float, float] | None = None  # (time, yaw command) while searching
         self._last_control: ControlOutput | None = None
         self._last_person: PersonEstimate | None = None
+        self._holding = True  # a MAV starts formation flight only once it has heard every teammate afresh
         self._counts = dict.fromkeys(AgentCounters.__dataclass_fields__, 0)
 
     @property
@@ -277,11 +290,16 @@ class Agent:
         known: int,
         inputs: AgentInputs,
     ) -> _Step:
-        """Solve the formation controller on the teammates' plans stamped at or after since_s; steer to the
-        roster slot when teammates are unheard."""
+        """Solve the formation controller on the teammates' plans stamped at or after since_s; hold when a
+        roster teammate is unheard for blind_after_s; else steer to the roster slot while some are not in
+        formation."""
         counts = self._counts
+        hold_reason = self._hold_reason(now_s, inputs.roster)
+        self._holding = hold = hold_reason is not None
+        if hold:  # no teammate rows (the trunks' stay): a neighbour's gap must not push a resting MAV about
+            since_s = math.inf
         slot = dict(inputs.roster).get(self.vehicle_id)
-        used_slot = slot is not None and known < len(inputs.roster) - 1
+        used_slot = slot is not None and known < len(inputs.roster) - 1 and not hold
         phantoms: tuple[HorizonPlan, ...] = ()
         if used_slot and person is not None:
             phantoms = self._phantoms(now_s, person, inputs, self._teammates.fresh_ids(since_s))
@@ -302,8 +320,9 @@ class Agent:
                 teammates=self._teammates.view(since_s, phantoms),
                 obstacles=inputs.obstacles,
                 formation=inputs.formation,
-                in_formation=True,
+                in_formation=not hold,
                 preferred_bearing_rad=slot if used_slot else None,
+                hold=hold,
             )
         except Exception as exc:  # the loop must survive a controller bug: hold and report it
             counts["controller_errors"] += 1
@@ -329,6 +348,9 @@ class Agent:
         elif control.status == SolveStatus.ESCAPE:
             counts["escape_ticks"] += 1
             fault = control.fault
+        elif control.status == SolveStatus.HOLD:
+            counts["hold_ticks"] += 1
+            fault = hold_reason
         setpoint = Setpoint(
             stamp_s=now_s,
             position_m=control.waypoint_position_m,
@@ -405,6 +427,28 @@ class Agent:
                 )
             )
         return tuple(out)
+
+    def _hold_reason(self, now_s: float, roster: tuple[tuple[int, float], ...]) -> str | None:
+        """Why this tick holds (a roster teammate unheard for blind_after_s; or, holding already, one not
+        heard within resume_within_s), or None."""
+        ap = self._ap
+        unheard = self._unheard(now_s, roster, ap.blind_after_s)
+        if unheard:
+            return (
+                f"hold: teammate {', '.join(map(str, unheard))} unheard for more than {ap.blind_after_s:g} s"
+            )
+        waiting = self._unheard(now_s, roster, ap.resume_within_s) if self._holding else []
+        if waiting:
+            ids = ", ".join(map(str, waiting))
+            return f"hold: waiting to hear teammate {ids} within {ap.resume_within_s:g} s"
+        return None
+
+    def _unheard(self, now_s: float, roster: tuple[tuple[int, float], ...], within_s: float) -> list[int]:
+        """The roster teammates (ids) with no plan stamped within within_s ([] when holds are off)."""
+        if self._ap.blind_after_s <= 0.0:
+            return []
+        heard = self._teammates.ids_since(now_s - within_s)
+        return [vid for vid, _ in roster if vid != self.vehicle_id and vid not in heard]
 
     def _search_yaw(self, now_s: float, yaw_rad: float) -> float:
         """The yaw command of the search turn: advancing at search_yaw_rate_radps from where it began."""

@@ -60,7 +60,7 @@ __all__ = [
 class MissionCounters:
     """Rejected inputs, summed over the team: operator actions refused; detections the trackers ignored
     (gated, stale, invalid); malformed or misaddressed messages; controller exceptions; braking ticks; escape
-    ticks (separation rows that could not all hold)."""
+    ticks (separation rows that could not all hold); hold ticks (a roster teammate unheard too long)."""
 
     rejected_actions: int = 0
     rejected_detections: int = 0
@@ -68,6 +68,7 @@ class MissionCounters:
     controller_errors: int = 0
     braking_ticks: int = 0
     escape_ticks: int = 0
+    hold_ticks: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,7 +90,15 @@ class MissionSnapshot:
 def team_counters(vehicles: Sequence[VehicleSnapshot], *, rejected_actions: int) -> MissionCounters:
     """The team's rejected-input counters summed over its vehicles' snapshots."""
     totals = dict.fromkeys(
-        ("rejected_detections", "rejected_messages", "controller_errors", "braking_ticks", "escape_ticks"), 0
+        (
+            "rejected_detections",
+            "rejected_messages",
+            "controller_errors",
+            "braking_ticks",
+            "escape_ticks",
+            "hold_ticks",
+        ),
+        0,
     )
     for v in vehicles:
         tracker, counters = v.tracker, v.counters
@@ -100,6 +109,7 @@ def team_counters(vehicles: Sequence[VehicleSnapshot], *, rejected_actions: int)
         totals["controller_errors"] += counters.controller_errors
         totals["braking_ticks"] += counters.braking_ticks
         totals["escape_ticks"] += counters.escape_ticks
+        totals["hold_ticks"] += counters.hold_ticks
     return MissionCounters(rejected_actions=rejected_actions, **totals)
 
 

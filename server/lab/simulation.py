@@ -159,6 +159,7 @@ def _extras(setup: SimSetup, errors_m: list[float | None]) -> dict[str, Any]:
             "controller_errors": snap.counters.controller_errors,
             "braking_ticks": snap.counters.braking_ticks,
             "escape_ticks": snap.counters.escape_ticks,
+            "hold_ticks": snap.counters.hold_ticks,
             "messages_sent": links.sent,
             "messages_delivered": links.delivered,
             "messages_dropped": links.dropped,
@@ -172,6 +173,7 @@ def _extras(setup: SimSetup, errors_m: list[float | None]) -> dict[str, Any]:
                 "own_detections_fused": v.counters.own_detections_fused,
                 "teammate_detections_fused": v.counters.teammate_detections_fused,
                 "slot_ticks": v.counters.slot_ticks,
+                "hold_ticks": v.counters.hold_ticks,
             }
             for i, v in enumerate(snap.vehicles)
         ],

@@ -17,7 +17,8 @@ loop's pace), so a replayed view gives the same conditions as the live one did. 
   second, or its last ticks took so long that it cannot reach that fraction (warning);
 - failsafe: the autopilot runs its own failsafe (battery, offboard loss, ...) (critical);
 - arming: the autopilot refused to arm (warning);
-- solver: the MPC failed and the MAV brakes instead (warning).
+- solver: the MPC failed and the MAV brakes instead (warning);
+- hold: the MAV holds because it has not heard a teammate (docs/safety.md#link-loss-the-hold) (warning).
 """
 
 from __future__ import annotations
@@ -80,6 +81,7 @@ def conditions(view: SceneView, params: AlertParams) -> list[Condition]:
         out += _agent(v, params)
         out += _autopilot(v)
         out += _solver(v)
+        out += _hold(v)
         out += _obstacles(v, view, params)
     out += _separation(view, params)
     out += _realtime(view, params)
@@ -195,15 +197,24 @@ def _autopilot(v: VehicleView) -> list[Condition]:
 
 
 def _solver(v: VehicleView) -> list[Condition]:
-    if v.solve_status != "braking":
+    return _status_warning(v, "braking", "solver", "solver failed, braking")
+
+
+def _hold(v: VehicleView) -> list[Condition]:
+    return _status_warning(v, "hold", "hold", "holds, not hearing its team")
+
+
+def _status_warning(v: VehicleView, status: str, kind: str, what: str) -> list[Condition]:
+    """A warning while the MAV's controller reports `status`, with its fault (less the status prefix)."""
+    if v.solve_status != status:
         return []
-    why = f": {v.fault}" if v.fault else ""
+    why = f": {v.fault.removeprefix(status + ': ')}" if v.fault else ""
     return [
         Condition(
-            kind="solver",
+            kind=kind,
             vehicle_id=v.vehicle_id,
             severity=Severity.WARNING,
-            message=f"MAV {v.vehicle_id} solver failed, braking{why}",
+            message=f"MAV {v.vehicle_id} {what}{why}",
         )
     ]
 

@@ -147,14 +147,93 @@ def test_a_newer_plan_replaces_an_older_one_but_not_the_reverse():
 ROSTER = ((1, 0.0), (2, 2.0 * math.pi / 3.0), (3, 4.0 * math.pi / 3.0))
 
 
-def test_the_roster_slot_is_used_only_while_teammates_are_unheard():
+def test_the_roster_slot_is_used_only_while_teammates_are_not_in_formation():
     agent = Agent(vehicle_id=1)
-    alone = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), roster=ROSTER))
-    assert alone.used_slot and alone.teammates_known == 0
+    climbing = (_plan(2, 0.0, [-4.0, 6.9, 5.0], False), _plan(3, 0.0, [-4.0, -6.9, 5.0], False))
+    taking_off = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=climbing, roster=ROSTER))
+    assert taking_off.used_slot and taking_off.teammates_known == 0
     mates = (_plan(2, 0.05, [-4.0, 6.9, 8.9]), _plan(3, 0.05, [-4.0, -6.9, 8.9]))
     heard = agent.tick(0.1, _inputs(0.1, received=mates, roster=ROSTER))
     assert not heard.used_slot and heard.teammates_known == 2
     assert heard.counters.slot_ticks == 1
+
+
+def test_a_roster_teammate_never_heard_makes_the_mav_hold_where_it_is():
+    agent = Agent(vehicle_id=1)
+    heard = (_plan(2, 0.0, [-4.0, 6.9, 8.9]),)
+    out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=heard, roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "hold"
+    assert out.fault == "hold: teammate 3 unheard for more than 1.5 s"
+    assert out.counters.hold_ticks == 1 and not out.used_slot
+    assert out.plan is not None and not out.plan.in_formation  # the others keep their whole distance
+    assert not out.control.external_inputs.any()  # no field pushes a holding MAV
+    assert out.setpoint is not None  # at rest, at h_des above the person, where it is horizontally
+    np.testing.assert_allclose(out.plan.positions_m[-1], [8.0, 0.0, 8.9], atol=0.05)
+    np.testing.assert_allclose(out.setpoint.velocity_mps, 0.0, atol=0.05)
+
+
+def test_a_holding_mav_is_not_pushed_about_by_a_teammate_close_by():
+    agent = Agent(vehicle_id=1)
+    close = (_plan(2, 0.0, [7.0, 0.0, 8.9]),)  # 1 m away, heard; 3 unheard: hold
+    out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=close, roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "hold"
+    assert out.plan is not None
+    np.testing.assert_allclose(out.plan.positions_m[-1], [8.0, 0.0, 8.9], atol=0.05)
+
+
+def test_the_hold_starts_when_a_teammate_is_silent_for_longer_than_blind_after_s():
+    agent = Agent(vehicle_id=1)
+    mates = (_plan(2, 0.0, [-4.0, 6.9, 8.9]), _plan(3, 0.0, [-4.0, -6.9, 8.9]))
+    agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=mates, roster=ROSTER))
+    statuses = {}
+    for t in (1.0, 1.5, 1.6):
+        only_2 = (_plan(2, t, [-4.0, 6.9, 8.9]),)  # 3 falls silent after its plan stamped 0.0
+        out = agent.tick(t, _inputs(t, received=only_2, roster=ROSTER))
+        assert out.control is not None
+        statuses[t] = out.control.status.value
+    assert statuses == {1.0: "solved", 1.5: "solved", 1.6: "hold"}
+
+
+def test_the_hold_ends_as_soon_as_every_teammate_is_heard_again():
+    agent = Agent(vehicle_id=1)
+    agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), roster=ROSTER))
+    mates = (_plan(2, 0.1, [-4.0, 6.9, 8.9]), _plan(3, 0.1, [-4.0, -6.9, 8.9]))
+    out = agent.tick(0.1, _inputs(0.1, received=mates, roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "solved"
+    assert out.plan is not None and out.plan.in_formation and out.counters.hold_ticks == 1
+
+
+def test_a_hold_ends_only_when_every_teammate_is_heard_within_resume_within_s():
+    agent = Agent(vehicle_id=1)
+    agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), roster=ROSTER))  # nobody heard yet: hold
+    statuses = []
+    for t, stamp_3 in ((0.1, 0.05), (0.2, None), (1.0, None), (1.1, 1.05)):
+        mates = [_plan(2, t - 0.05, [-4.0, 6.9, 8.9])]
+        if stamp_3 is not None:
+            mates.append(_plan(3, stamp_3, [-4.0, -6.9, 8.9]))
+        out = agent.tick(t, _inputs(t, received=tuple(mates), roster=ROSTER))
+        assert out.control is not None
+        statuses.append(out.control.status.value)
+    # 0.1: both heard afresh, flying; 1.0: 3 silent for 0.95 s, within blind_after_s, still flying
+    assert statuses == ["solved", "solved", "solved", "solved"]
+    out = agent.tick(1.7, _inputs(1.7, received=(_plan(2, 1.65, [-4.0, 6.9, 8.9]),), roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "solved"  # 3 last heard 0.65 s ago
+    out = agent.tick(2.6, _inputs(2.6, received=(_plan(2, 2.55, [-4.0, 6.9, 8.9]),), roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "hold"  # 3 silent for 1.55 s
+    late = (_plan(2, 2.65, [-4.0, 6.9, 8.9]), _plan(3, 2.0, [-4.0, -6.9, 8.9]))
+    out = agent.tick(2.7, _inputs(2.7, received=late, roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "hold"  # 3 heard, but 0.7 s ago
+    assert out.fault == "hold: waiting to hear teammate 3 within 0.5 s"
+    fresh = (_plan(2, 2.75, [-4.0, 6.9, 8.9]), _plan(3, 2.75, [-4.0, -6.9, 8.9]))
+    out = agent.tick(2.8, _inputs(2.8, received=fresh, roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "solved"
+
+
+def test_holds_are_off_with_blind_after_s_zero():
+    agent = Agent(vehicle_id=1, agent_params=AgentParams(blind_after_s=0.0))
+    out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), roster=ROSTER))
+    assert out.control is not None and out.control.status.value == "solved"
+    assert out.counters.hold_ticks == 0
 
 
 class _Recorder:
@@ -168,8 +247,21 @@ class _Recorder:
         return self.inner.step(**kwargs)
 
 
-def test_unheard_teammates_are_stood_in_for_by_phantoms_at_their_slots():
+def test_teammates_not_in_formation_are_stood_in_for_by_phantoms_at_their_slots():
     agent = Agent(vehicle_id=1)
+    spy = _Recorder(agent._controller)
+    agent._controller = cast(FormationController, spy)
+    heard = (_plan(2, 0.0, [-4.0, 6.9, 8.9]), _plan(3, 0.0, [-4.0, -6.9, 5.0], False))
+    agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=heard, roster=ROSTER))
+    call = spy.calls[-1]
+    assert call["preferred_bearing_rad"] == pytest.approx(0.0)
+    phantom = next(p for p in call["teammates"] if p.vehicle_id == 3 and p.in_formation)
+    expected = PERSON + [8.0 * math.cos(4.0 * math.pi / 3.0), 8.0 * math.sin(4.0 * math.pi / 3.0), 8.0]
+    np.testing.assert_allclose(phantom.positions_m[0], expected, atol=1e-9)  # at its slot, not climbing
+
+
+def test_with_holds_off_unheard_teammates_are_stood_in_for_by_phantoms_at_their_slots():
+    agent = Agent(vehicle_id=1, agent_params=AgentParams(blind_after_s=0.0))
     spy = _Recorder(agent._controller)
     agent._controller = cast(FormationController, spy)
     heard = (_plan(2, 0.0, [-4.0, 6.9, 8.9]),)

@@ -80,4 +80,7 @@ def test_with_every_message_lost_each_mav_tracks_with_its_own_detections(paper_r
     vehicles = paper_run(8, comm_loss=1.0)["vehicles"]
     assert all(v["teammate_detections_fused"] == 0 for v in vehicles)
     assert all(v["own_detections_fused"] > 200 for v in vehicles)
-    assert all(v["tracking_error_m_mean"] < 2.0 for v in vehicles)
+    # Hearing nobody, every MAV holds where it took off and films from there (docs/safety.md, the hold):
+    # 1.2-2.3 m as measured. Flying blind to the roster slots kept this run below 2 m, but brought MAVs of
+    # the safety sweep within 0.2 m of each other.
+    assert all(v["tracking_error_m_mean"] < 2.5 for v in vehicles)
