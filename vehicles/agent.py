@@ -69,8 +69,8 @@ class AgentParams:
     MAV that lost the person turns on the spot to look for it (0.5 rad/s: a full turn in 12.6 s, slow enough
     for the 4 Hz detector to see the person in several frames of each turn); replan_period_s: 0 solves the MPC
     every tick (the paper), > 0 at most this often (see the module docstring); blind_after_s: a roster
-    teammate unheard for longer makes this MAV hold (0: never hold). 1.0 s is 10 lost plans in a row: at any
-    moment, with 25 % link loss a chance of 1e-6 per teammate, with 90 % loss 0.35 (docs/safety.md);
+    teammate unheard for longer makes this MAV hold (0: never hold). 1.5 s is 15 lost plans in a row: at any
+    moment, with 25 % link loss a chance of 1e-9 per teammate, with 90 % loss 0.21 (docs/safety.md);
     resume_within_s: the hold ends (and formation flight first begins) once every roster teammate has been
     heard within this long: the age up to which the separation rows trust a teammate to hold its own
     (SeparationParams.cooperative_age_s)."""
@@ -79,7 +79,7 @@ class AgentParams:
     teammate_timeout_s: float = 3.0
     search_yaw_rate_radps: float = 0.5
     replan_period_s: float = 0.0
-    blind_after_s: float = 1.0
+    blind_after_s: float = 1.5
     resume_within_s: float = 0.5
 
 

@@ -163,7 +163,7 @@ def test_a_roster_teammate_never_heard_makes_the_mav_hold_where_it_is():
     heard = (_plan(2, 0.0, [-4.0, 6.9, 8.9]),)
     out = agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=heard, roster=ROSTER))
     assert out.control is not None and out.control.status.value == "hold"
-    assert out.fault == "hold: teammate 3 unheard for more than 1 s"
+    assert out.fault == "hold: teammate 3 unheard for more than 1.5 s"
     assert out.counters.hold_ticks == 1 and not out.used_slot
     assert out.plan is not None and not out.plan.in_formation  # the others keep their whole distance
     assert not out.control.external_inputs.any()  # no field pushes a holding MAV
@@ -186,12 +186,12 @@ def test_the_hold_starts_when_a_teammate_is_silent_for_longer_than_blind_after_s
     mates = (_plan(2, 0.0, [-4.0, 6.9, 8.9]), _plan(3, 0.0, [-4.0, -6.9, 8.9]))
     agent.tick(0.0, _inputs(0.0, detections=(_det(1, 0.0),), received=mates, roster=ROSTER))
     statuses = {}
-    for t in (0.5, 1.0, 1.1):
+    for t in (1.0, 1.5, 1.6):
         only_2 = (_plan(2, t, [-4.0, 6.9, 8.9]),)  # 3 falls silent after its plan stamped 0.0
         out = agent.tick(t, _inputs(t, received=only_2, roster=ROSTER))
         assert out.control is not None
         statuses[t] = out.control.status.value
-    assert statuses == {0.5: "solved", 1.0: "solved", 1.1: "hold"}
+    assert statuses == {1.0: "solved", 1.5: "solved", 1.6: "hold"}
 
 
 def test_the_hold_ends_as_soon_as_every_teammate_is_heard_again():

@@ -188,10 +188,10 @@ def test_a_braking_solver_is_a_warning_with_its_fault():
 
 
 def test_a_link_loss_hold_is_a_warning_naming_the_unheard_teammates():
-    fault = "hold: teammate 3, 5 unheard for more than 1 s"
+    fault = "hold: teammate 3, 5 unheard for more than 1.5 s"
     (c,) = conditions(scene(mav(1, solve_status="hold", fault=fault)), PARAMS)
     assert c.kind == "hold" and c.severity == Severity.WARNING
-    assert c.message == "MAV 1 holds, not hearing its team: teammate 3, 5 unheard for more than 1 s"
+    assert c.message == "MAV 1 holds, not hearing its team: teammate 3, 5 unheard for more than 1.5 s"
 
 
 def test_inconsistent_thresholds_are_refused():
