@@ -143,10 +143,12 @@ class TeammateTable:
     def view(self, since_s: float, extra: Sequence[HorizonPlan] = ()) -> TeammateView:
         return TeammateView(self, since_s, extra)
 
-    def fresh_ids(self, since_s: float) -> set[int]:
-        """Vehicle ids of the in-formation plans stamped at or after since_s."""
+    def fresh_ids(self, since_s: float, *, in_formation: bool = True) -> set[int]:
+        """Vehicle ids of the plans stamped at or after since_s (only in-formation ones by default)."""
         n = self._count
-        fresh = (self._stamps[:n] >= since_s) & self._in_formation[:n]
+        fresh = self._stamps[:n] >= since_s
+        if in_formation:
+            fresh &= self._in_formation[:n]
         return set(self._row_ids[:n][fresh].tolist())
 
     def update(self, plan: HorizonPlan) -> str:
@@ -188,11 +190,6 @@ class TeammateTable:
         self._dts[row] = plan.dt_s
         self._in_formation[row] = plan.in_formation
         return "stored"
-
-    def ids_since(self, since_s: float) -> set[int]:
-        """Vehicle ids of the plans stamped at or after since_s, in formation or not."""
-        n = self._count
-        return set(self._row_ids[:n][self._stamps[:n] >= since_s].tolist())
 
     def fresh_count(self, since_s: float, *, in_formation: bool = True) -> int:
         """How many stored plans are stamped at or after since_s (only in-formation ones by default)."""

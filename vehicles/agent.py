@@ -447,7 +447,7 @@ class Agent:
         """The roster teammates (ids) with no plan stamped within within_s ([] when holds are off)."""
         if self._ap.blind_after_s <= 0.0:
             return []
-        heard = self._teammates.ids_since(now_s - within_s)
+        heard = self._teammates.fresh_ids(now_s - within_s, in_formation=False)
         return [vid for vid, _ in roster if vid != self.vehicle_id and vid not in heard]
 
     def _search_yaw(self, now_s: float, yaw_rad: float) -> float:
