@@ -56,6 +56,7 @@ from controller.reference import (
     bearing_rad,
     clip_into,
     initial_state,
+    plan_acceleration_at,
     plan_state_at,
     terminal_reference,
 )
@@ -216,7 +217,7 @@ class FormationController:
             target, target_v = self._hold_target(tick, person, formation)
         else:
             target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
-        rows = self._separation(own, own_path, own_vel, mates, obstacle_set)
+        rows = self._separation(tick, own_path, own_vel, mates, obstacle_set)
         planes = rows.planes if rows is not None and rows.count else None
 
         def solve(aim_p: np.ndarray, aim_v: np.ndarray) -> MpcSolution:
@@ -264,8 +265,8 @@ class FormationController:
                 params=mp,
             )
         plan = self._plan(tick, positions, velocities)
-        wp_p, wp_v = self._waypoint(plan)
-        if not _finite(wp_p, wp_v):
+        wp_p, wp_v, wp_a = self._waypoint(plan)
+        if not _finite(wp_p, wp_v, wp_a):
             return self._brake(tick, SolveStatus.BRAKING, "the way-point was not finite")
         self._prev_plan = plan
         self._counts["solved"] += 1
@@ -279,6 +280,7 @@ class FormationController:
             plan=plan,
             waypoint_position_m=wp_p,
             waypoint_velocity_mps=wp_v,
+            waypoint_acceleration_mps2=wp_a,
             yaw_rad=yaw,
             status=status,
             external_inputs=f_total,
@@ -438,7 +440,7 @@ class FormationController:
 
     def _separation(
         self,
-        own: VehicleState,
+        tick: _Tick,
         own_path: np.ndarray,
         own_vel: np.ndarray,
         mates: TeammatePaths,
@@ -448,6 +450,9 @@ class FormationController:
         prm = self._params
         if not prm.separation.enabled:
             return None
+        own = tick.own
+        measured = np.asarray(own.position_m, dtype=float)
+        lag = measured - tick.start_p if _sane(measured) else np.zeros(3)
         ages = mates.ages
         speed_term = teammate_age_term_m(ages, prm.fields)
         radii = mates.d_max_m - prm.fields.teammate_d_max_base_m - speed_term  # both r_sigma (eq. 15)
@@ -462,6 +467,7 @@ class FormationController:
             dt_s=self._mpc_params.dt_s,
             own_id=self._id,
             params=prm.separation,
+            lag_m=lag,
         )
 
     def _imminent_miss(self, sol: MpcSolution, planes: HalfPlanes | None) -> float:
@@ -561,9 +567,11 @@ class FormationController:
             position_cov_m2=cov if _finite(cov) else DEFAULT_COV_M2,
         )
 
-    def _waypoint(self, plan: HorizonPlan) -> tuple[np.ndarray, np.ndarray]:
-        k = min(self._params.reference.waypoint_step, len(plan.positions_m) - 1)
-        return np.array(plan.positions_m[k]), np.array(plan.velocities_mps[k])
+    def _waypoint(self, plan: HorizonPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The set-point: the plan's position, velocity and acceleration waypoint_step steps ahead."""
+        ahead_s = self._params.reference.waypoint_step * plan.dt_s
+        p, v = plan_state_at(plan.positions_m, plan.velocities_mps, elapsed_s=ahead_s, dt_s=plan.dt_s)
+        return p, v, plan_acceleration_at(plan.velocities_mps, elapsed_s=ahead_s, dt_s=plan.dt_s)
 
     def _brake(
         self, tick: _Tick, status: SolveStatus, fault: str, iterations: int = 0, solve_time_s: float = 0.0
@@ -573,7 +581,7 @@ class FormationController:
             position_m=tick.start_p, velocity_mps=tick.start_v, params=self._mpc_params
         )
         plan = self._plan(tick, positions, velocities)
-        wp_p, wp_v = self._waypoint(plan)
+        wp_p, wp_v, wp_a = self._waypoint(plan)
         person = tick.person
         if person is not None and _finite(person.position_m):
             yaw = bearing_rad(from_m=wp_p, to_m=np.asarray(person.position_m, dtype=float))
@@ -585,6 +593,7 @@ class FormationController:
             plan=plan,
             waypoint_position_m=wp_p,
             waypoint_velocity_mps=wp_v,
+            waypoint_acceleration_mps2=wp_a,
             yaw_rad=yaw,
             status=status,
             external_inputs=np.zeros((self._steps, 3)),

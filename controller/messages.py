@@ -185,10 +185,11 @@ class SolveStatus(str, Enum):  # noqa: UP042 - str() and format() must stay as t
 class ControlOutput:
     """One formation-controller step's result.
 
-    plan: the horizon plan (published); waypoint_position_m (3,) and waypoint_velocity_mps (3,): the set-point
-    for the autopilot; yaw_rad: heading that points the camera at the person; external_inputs: (N+1, 3) f(n)
-    used in the plan (m/s^2); fault: a one-line reason when status is not SOLVED; solver_iterations and
-    solver_time_s come from OSQP's own report.
+    plan: the horizon plan (published); waypoint_position_m (3,), waypoint_velocity_mps (3,) and
+    waypoint_acceleration_mps2 (3,): the set-point for the autopilot, the plan's state waypoint_step ahead and
+    its acceleration on the step from there (feed-forward); yaw_rad: heading that points the camera at the
+    person; external_inputs: (N+1, 3) f(n) used in the plan (m/s^2); fault: a one-line reason when status is
+    not SOLVED; solver_iterations and solver_time_s come from the solver's own report.
     """
 
     plan: HorizonPlan
@@ -200,8 +201,10 @@ class ControlOutput:
     fault: str | None = None
     solver_iterations: int = 0
     solver_time_s: float = 0.0
+    waypoint_acceleration_mps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         _freeze(self, "waypoint_position_m", (3,))
         _freeze(self, "waypoint_velocity_mps", (3,))
+        _freeze(self, "waypoint_acceleration_mps2", (3,))
         _freeze(self, "external_inputs", (-1, 3))

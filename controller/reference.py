@@ -95,6 +95,17 @@ def plan_state_at(
     )
 
 
+def plan_acceleration_at(velocities_mps: np.ndarray, *, elapsed_s: float, dt_s: float) -> np.ndarray:
+    """(3,) acceleration of a plan (velocities (N+2, 3)) over the step that begins at or before `elapsed_s`
+    after its x(0): the plan's u + f + g on that step, what the autopilot is told as feed-forward. Zero from
+    the last state on (the plan is held there)."""
+    last = len(velocities_mps) - 1
+    lo = int(np.floor(max(elapsed_s / dt_s, 0.0) + 1e-9))  # a whole step's time may land just below it
+    if lo >= last:
+        return np.zeros(3)
+    return (np.asarray(velocities_mps[lo + 1], dtype=float) - velocities_mps[lo]) / dt_s
+
+
 def bearing_rad(*, from_m: np.ndarray, to_m: np.ndarray) -> float:
     """ENU angle of the horizontal direction from `from_m` to `to_m` (0 when they coincide horizontally)."""
     dx, dy = float(to_m[0] - from_m[0]), float(to_m[1] - from_m[1])

@@ -19,7 +19,8 @@ The paper's repulsive fields (eqs. 13, 15) shape the plan but promise nothing. T
   separation_m + inflation_j from m_j(n), and the braking room of the whole closing speed at the last step.
 - **Trunks.** A vertical plane tangent to the trunk's cylinder grown by `obstacle_clearance_m` (and our
   covariance radius), facing our planned position, at every step where that position is below the trunk's
-  top; the disc lies wholly behind the plane, so keeping to the plane keeps clear of the disc.
+  top; the disc lies wholly behind the plane, so keeping to the plane keeps clear of the disc. The plane is
+  moved out by how far the vehicle lags its plan towards the trunk (`lag_m`): the row is for the vehicle.
 
 All rows are soft with one exact penalty (controller/mpc.py `HalfPlanes`): the QP is never infeasible, and
 whenever the rows can all hold the plan holds them exactly. When they cannot (squeezed between trunks, a
@@ -231,14 +232,17 @@ def separation_rows(
     dt_s: float,
     own_id: int,
     params: SeparationParams,
+    lag_m: np.ndarray | None = None,
     compiled: bool = True,
 ) -> SeparationRows:
     """Every separation row of one tick (see the module docstring), as the MPC's soft `HalfPlanes`.
 
     own_path_m, own_velocities_mps: (S, 3) our previous plan on the horizon, starting at the start state;
     mate_ages_s (J,): each teammate plan's age; inflation_m (J,): what each row grows by (m).
-    The rows constrain plan step n = 1..S-1 (the MPC's x(n); x(0) is the measured state). compiled: build
-    them with separation_kernel.py's kernels (the default) or with the numpy reference here.
+    The rows constrain plan step n = 1..S-1 (the MPC's x(n); x(0) is the start state). lag_m (3,): where
+    the vehicle is less where its plan starts (the follower lags the plan, up to the leash); every row is
+    tightened by the lag's part towards its plane, so it holds for the vehicle rather than for the plan.
+    compiled: build them with separation_kernel.py's kernels (the default) or with the numpy reference here.
     """
     cooperative = mates.in_formation & (mate_ages_s <= params.cooperative_age_s)
     build = _compiled_rows if compiled else _reference_rows
@@ -260,12 +264,15 @@ def separation_rows(
         closest = float(per_mate[closest_index])
     else:
         closest_index, closest = -1, math.inf
+    if lag_m is not None:
+        o_offsets = o_offsets + np.maximum(-(o_normals @ np.asarray(lag_m, dtype=float)), 0.0)
     normals = np.concatenate([t_normals, o_normals])
+    offsets = np.concatenate([t_offsets, o_offsets])
     planes = HalfPlanes(
         steps=np.concatenate([t_steps, o_steps]).astype(np.int64),
         normals_xy=normals[:, :2],
         normals_z=normals[:, 2],
-        offsets=np.concatenate([t_offsets, o_offsets]),
+        offsets=offsets,
     )
     return SeparationRows(planes, int(t_steps.shape[0]), int(o_steps.shape[0]), closest, closest_index)
 

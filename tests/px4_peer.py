@@ -653,7 +653,7 @@ class Px4Peer:
             self._yaw_rate = 0.0
             return
         self._battery = max(0.0, self._battery - 5e-4 * dt)
-        target, v_ff, yaw_target, vz_fixed = self._guidance(now)
+        target, v_ff, a_ff, yaw_target, vz_fixed = self._guidance(now)
         p_gain = 1.0
         v_cmd = v_ff + p_gain * (target - self._p)
         lim = float(self._params["MPC_XY_VEL_MAX"][0])
@@ -665,7 +665,7 @@ class Px4Peer:
         v_cmd[2] = float(
             np.clip(v_cmd[2], -self._params["MPC_Z_VEL_MAX_UP"][0], self._params["MPC_Z_VEL_MAX_DN"][0])
         )
-        a = 3.0 * (v_cmd - self._v)
+        a = a_ff + 3.0 * (v_cmd - self._v)
         norm = np.linalg.norm(a)
         if norm > self.max_accel_mps2:
             a *= self.max_accel_mps2 / norm
@@ -681,15 +681,17 @@ class Px4Peer:
         self._ground_contact(now)
 
     def _guidance(self, now: float):
-        """(target NED (3,), velocity feed-forward (3,), yaw target or None, fixed vertical speed or None)."""
+        """(target NED (3,), velocity and acceleration feed-forward (3,), yaw target or None, fixed vertical
+        speed or None)."""
         zero = np.zeros(3)
         if self._mode is PeerMode.OFFBOARD and self._sp_used is not None:
             sp = self._sp_used
             mask = sp.type_mask
             pos = np.array(sp.position_ned) if not mask & IGNORE_POSITION else self._p.copy()
             vel = np.array(sp.velocity_ned) if not mask & IGNORE_VELOCITY else zero
+            acc = np.array(sp.acceleration_ned) if not mask & IGNORE_ACCELERATION else zero
             yaw = None if mask & IGNORE_YAW else sp.yaw_rad
-            return pos, vel, yaw, None
+            return pos, vel, acc, yaw, None
         if self._mode is PeerMode.TAKEOFF:
             alt = float(self._params["MIS_TAKEOFF_ALT"][0])
             target = np.array([self._home_ned[0], self._home_ned[1], self._ground_down_m - alt])
@@ -697,10 +699,10 @@ class Px4Peer:
             vz = -speed if self._p[2] - target[2] > 0.5 else None
             if abs(self._p[2] - target[2]) < 0.2:
                 self._request_mode(PeerMode.HOLD, now)  # PX4's navigator: take-off done, loiter
-            return target, zero, None, vz
+            return target, zero, zero, None, vz
         if self._mode is PeerMode.LAND:
             target = np.array([self._land_xy[0], self._land_xy[1], self._p[2]])
-            return target, zero, None, float(self._params["MPC_LAND_SPEED"][0])
+            return target, zero, zero, None, float(self._params["MPC_LAND_SPEED"][0])
         if self._mode is PeerMode.RTL:
             cruise_down = min(self._p[2], self._ground_down_m - 5.0)
             target = np.array([self._home_ned[0], self._home_ned[1], cruise_down])
@@ -710,8 +712,8 @@ class Px4Peer:
                     self._show_mode(now)
                 else:
                     self._request_mode(PeerMode.LAND, now)
-            return target, zero, None, None
-        return self._hold_point.copy(), zero, None, None  # Hold and the pilot modes (sticks centred)
+            return target, zero, zero, None, None
+        return self._hold_point.copy(), zero, zero, None, None  # Hold and the pilot modes (sticks centred)
 
     def _ground_contact(self, now: float) -> None:
         if self._p[2] >= self._ground_down_m and self._v[2] >= 0.0:
@@ -892,7 +894,7 @@ def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, fl
 
 # What skyring's set-points must look like: local NED position + velocity feed-forward + yaw (accelerations
 # and yaw rate ignored), as MAVSDK's set_position_velocity_ned sends them.
-POSITION_VELOCITY_YAW_MASK = IGNORE_ACCELERATION | IGNORE_YAW_RATE
+POSITION_VELOCITY_ACCELERATION_YAW_MASK = IGNORE_YAW_RATE
 
 
 def setpoint_problems(
@@ -904,9 +906,9 @@ def setpoint_problems(
         problems.append(f"addressed to {sp.target_system}/{sp.target_component}")
     if sp.frame != mavlink.MAV_FRAME_LOCAL_NED:
         problems.append(f"frame {sp.frame} is not MAV_FRAME_LOCAL_NED")
-    if sp.type_mask != POSITION_VELOCITY_YAW_MASK:
-        problems.append(f"type mask {sp.type_mask:#x} is not position + velocity + yaw")
-    values = (*sp.position_ned, *sp.velocity_ned, sp.yaw_rad)
+    if sp.type_mask != POSITION_VELOCITY_ACCELERATION_YAW_MASK:
+        problems.append(f"type mask {sp.type_mask:#x} is not position + velocity + acceleration + yaw")
+    values = (*sp.position_ned, *sp.velocity_ned, *sp.acceleration_ned, sp.yaw_rad)
     if not all(math.isfinite(v) for v in values):
         problems.append(f"non-finite values {values}")
     elif np.linalg.norm(sp.position_ned) > max_range_m or np.linalg.norm(sp.velocity_ned) > max_speed_mps:

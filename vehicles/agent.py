@@ -45,6 +45,7 @@ from controller.messages import (
     VehicleState,
 )
 from controller.params import ControllerParams, FormationParams
+from controller.reference import plan_acceleration_at, plan_state_at
 from controller.teammates import TeammateTable
 from controller.tracker import PersonTracker, TrackerStats, Verdict
 from vehicles.autopilot import AutopilotState, Setpoint
@@ -356,6 +357,7 @@ class Agent:
             position_m=control.waypoint_position_m,
             velocity_mps=control.waypoint_velocity_mps,
             yaw_rad=yaw,
+            acceleration_mps2=control.waypoint_acceleration_mps2,
         )
         return _Step(control=control, plan=control.plan, setpoint=setpoint, fault=fault, used_slot=used_slot)
 
@@ -386,19 +388,17 @@ class Agent:
 
     def _follow(self, now_s: float, plan: HorizonPlan, person: PersonEstimate) -> Setpoint:
         """The set-point of a tick between re-plans: the plan's state waypoint_step steps ahead of now."""
-        k = (now_s - plan.stamp_s) / plan.dt_s + self._params.reference.waypoint_step
-        k = min(max(k, 0.0), len(plan.positions_m) - 1.0)
-        lo = int(k)
-        hi = min(lo + 1, len(plan.positions_m) - 1)
-        a = k - lo
-        position = (1.0 - a) * plan.positions_m[lo] + a * plan.positions_m[hi]
-        velocity = (1.0 - a) * plan.velocities_mps[lo] + a * plan.velocities_mps[hi]
+        ahead_s = now_s - plan.stamp_s + self._params.reference.waypoint_step * plan.dt_s
+        position, velocity = plan_state_at(
+            plan.positions_m, plan.velocities_mps, elapsed_s=ahead_s, dt_s=plan.dt_s
+        )
         to_person = person.position_m - position
         return Setpoint(
             stamp_s=now_s,
             position_m=position,
             velocity_mps=velocity,
             yaw_rad=math.atan2(to_person[1], to_person[0]),
+            acceleration_mps2=plan_acceleration_at(plan.velocities_mps, elapsed_s=ahead_s, dt_s=plan.dt_s),
         )
 
     def _phantoms(

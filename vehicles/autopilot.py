@@ -79,20 +79,24 @@ class AutopilotState:
 
 @dataclass(frozen=True, eq=False)
 class Setpoint:
-    """An offboard set-point: ENU position_m (3,), velocity_mps (3,) feed-forward, yaw_rad (ENU), made at
-    stamp_s."""
+    """An offboard set-point: ENU position_m (3,), velocity_mps (3,) and acceleration_mps2 (3,) feed-forward,
+    yaw_rad (ENU), made at stamp_s. The acceleration is the plan's own (gravity not included): without it the
+    cascade learns of a planned brake only from the position and velocity it falls behind by."""
 
     stamp_s: float
     position_m: np.ndarray
     velocity_mps: np.ndarray
     yaw_rad: float
+    acceleration_mps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))
         _freeze(self, "velocity_mps", (3,))
+        _freeze(self, "acceleration_mps2", (3,))
         if not (
             np.all(np.isfinite(self.position_m))
             and np.all(np.isfinite(self.velocity_mps))
+            and np.all(np.isfinite(self.acceleration_mps2))
             and np.isfinite(self.yaw_rad)
         ):
             raise ValueError("a set-point must be finite")

@@ -83,6 +83,14 @@ def test_solved_step_sends_the_plans_next_state_as_way_point():
     np.testing.assert_array_equal(out.waypoint_velocity_mps, out.plan.velocities_mps[1])
 
 
+def test_solved_step_feeds_forward_the_plans_acceleration_on_the_step_from_the_way_point():
+    """What the plan does next from x(1): (v(2) - v(1)) / dt, so the autopilot brakes when the plan does."""
+    out = step(controller(), state(on_circle(30.0, 10.0, 5.0), velocity=(3.0, -2.0, 0.0)))
+    v = out.plan.velocities_mps
+    np.testing.assert_allclose(out.waypoint_acceleration_mps2, (v[2] - v[1]) / out.plan.dt_s, atol=1e-12)
+    assert np.linalg.norm(out.waypoint_acceleration_mps2) > 0.5  # the plan does turn the vehicle
+
+
 def test_yaw_faces_the_person_from_the_way_point():
     out = step(controller(), state(on_circle(120.0, 10.0, 5.0)))
     to_person = PERSON_AT[:2] - out.waypoint_position_m[:2]

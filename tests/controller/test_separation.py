@@ -147,6 +147,35 @@ def test_a_trunk_row_weighs_more_than_a_teammate_row():
     np.testing.assert_allclose(offsets, -5.0 * (5.0 - 0.7))  # the plane 0.5 + 0.2 m from the centre
 
 
+def test_a_vehicle_lagging_its_plan_towards_a_trunk_tightens_the_trunk_row_by_that_lag():
+    """The follower runs up to the leash behind its plan: a trunk row holds for where the vehicle is, so a
+    lag of 0.4 m towards the trunk moves the plane 0.4 m out; a lag away from it leaves the plane alone."""
+    trunk = ObstacleSet.from_obstacles(
+        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
+    )
+    still = line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0])
+
+    def planes(lag_x_m: float) -> HalfPlanes:
+        return separation_rows(
+            own_path_m=still,
+            own_velocities_mps=np.zeros((STEPS, 3)),
+            mates=mates(np.zeros((0, STEPS, 3))),
+            mate_ages_s=np.zeros(0),
+            inflation_m=np.zeros(0),
+            obstacles=trunk,
+            own_cov_radius_m=0.0,
+            dt_s=DT,
+            own_id=0,
+            params=PARAMS,
+            lag_m=np.array([lag_x_m, 0.0, 0.0]),
+        ).planes
+
+    limit = {lag: (p := planes(lag)).offsets / p.normals_xy[:, 0] for lag in (0.0, 0.4, -0.4)}  # x <= b / n
+    np.testing.assert_allclose(limit[0.0], 4.3, atol=1e-12)
+    np.testing.assert_allclose(limit[0.4], 3.9, atol=1e-12)
+    np.testing.assert_allclose(limit[-0.4], 4.3, atol=1e-12)
+
+
 def test_no_trunk_row_above_the_trunk_top():
     trunk = ObstacleSet.from_obstacles(
         (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=6.0),)

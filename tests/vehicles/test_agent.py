@@ -333,6 +333,13 @@ def test_with_a_replan_period_the_mpc_is_solved_that_often_and_followed_in_betwe
     np.testing.assert_allclose(
         outs[5].setpoint.velocity_mps, 0.5 * (plan.velocities_mps[1] + plan.velocities_mps[2]), atol=1e-9
     )
+    # and the acceleration of the step it is on, from 1 to 2
+    np.testing.assert_allclose(
+        outs[5].setpoint.acceleration_mps2,
+        (plan.velocities_mps[2] - plan.velocities_mps[1]) / plan.dt_s,
+        atol=1e-9,
+    )
+    np.testing.assert_allclose(outs[0].setpoint.acceleration_mps2, outs[0].control.waypoint_acceleration_mps2)
 
 
 def test_hold_plan_stays_at_the_reported_position():

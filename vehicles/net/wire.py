@@ -121,6 +121,7 @@ class AutopilotCommandBody(_Body, frozen=True):
     velocity_mps: Vec3 = (0.0, 0.0, 0.0)
     yaw_rad: float = 0.0
     height_m: float = 0.0
+    acceleration_mps2: Vec3 = (0.0, 0.0, 0.0)
 
 
 class ObstacleBody(_Body, frozen=True):
@@ -464,6 +465,7 @@ def setpoint_command(setpoint: Setpoint) -> AutopilotCommandBody:
         position_m=_vec(setpoint.position_m),
         velocity_mps=_vec(setpoint.velocity_mps),
         yaw_rad=float(setpoint.yaw_rad),
+        acceleration_mps2=_vec(setpoint.acceleration_mps2),
     )
 
 
@@ -474,6 +476,7 @@ def setpoint_from_wire(body: AutopilotCommandBody, *, stamp_s: float) -> Setpoin
         position_m=np.array(body.position_m),
         velocity_mps=np.array(body.velocity_mps),
         yaw_rad=body.yaw_rad,
+        acceleration_mps2=np.array(body.acceleration_mps2),
     )
 
 

@@ -187,27 +187,35 @@ class Px4Config:
 class NedSetpoint:
     """A set-point in one vehicle's local NED frame, as MAVSDK's offboard plugin takes it.
 
-    position_ned_m (3,), velocity_ned_mps (3,) feed-forward, yaw_ned_deg (0 = north, clockwise; degrees is
-    what MAVSDK's PositionNedYaw wants).
+    position_ned_m (3,), velocity_ned_mps (3,) and acceleration_ned_mps2 (3,) feed-forward, yaw_ned_deg (0 =
+    north, clockwise; degrees is what MAVSDK's PositionNedYaw wants).
     """
 
     position_ned_m: np.ndarray
     velocity_ned_mps: np.ndarray
     yaw_ned_deg: float
+    acceleration_ned_mps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position_ned_m", frozen_array(self.position_ned_m, (3,), "position_ned_m"))
         object.__setattr__(
             self, "velocity_ned_mps", frozen_array(self.velocity_ned_mps, (3,), "velocity_ned_mps")
         )
+        object.__setattr__(
+            self,
+            "acceleration_ned_mps2",
+            frozen_array(self.acceleration_ned_mps2, (3,), "acceleration_ned_mps2"),
+        )
 
 
 def ned_setpoint(setpoint: Setpoint, frame: LocalFrame) -> NedSetpoint:
-    """The team-ENU set-point expressed in the vehicle's local NED frame (position, velocity and yaw)."""
+    """The team-ENU set-point expressed in the vehicle's local NED frame (position, velocity, acceleration and
+    yaw)."""
     return NedSetpoint(
         position_ned_m=frame.to_ned(setpoint.position_m),
         velocity_ned_mps=frame.vector_to_ned(setpoint.velocity_mps),
         yaw_ned_deg=math.degrees(frame.yaw_to_ned(setpoint.yaw_rad)),
+        acceleration_ned_mps2=frame.vector_to_ned(setpoint.acceleration_mps2),
     )
 
 
@@ -1057,7 +1065,7 @@ class Px4Autopilot:
             await asyncio.sleep(interval)
 
     async def _forward(self, setpoint: Setpoint) -> None:
-        from mavsdk.asyncio.plugins.offboard import PositionNedYaw, VelocityNedYaw
+        from mavsdk.asyncio.plugins.offboard import AccelerationNed, PositionNedYaw, VelocityNedYaw
 
         frame = self._frame
         if frame is None:
@@ -1065,8 +1073,11 @@ class Px4Autopilot:
         ned = ned_setpoint(setpoint, frame)
         n, e, d = (float(x) for x in ned.position_ned_m)
         vn, ve, vd = (float(x) for x in ned.velocity_ned_mps)
-        await self._p.offboard.set_position_velocity_ned(
-            PositionNedYaw(n, e, d, ned.yaw_ned_deg), VelocityNedYaw(vn, ve, vd, ned.yaw_ned_deg)
+        an, ae, ad = (float(x) for x in ned.acceleration_ned_mps2)
+        await self._p.offboard.set_position_velocity_acceleration_ned(
+            PositionNedYaw(n, e, d, ned.yaw_ned_deg),
+            VelocityNedYaw(vn, ve, vd, ned.yaw_ned_deg),
+            AccelerationNed(an, ae, ad),
         )
 
 

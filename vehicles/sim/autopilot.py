@@ -2,7 +2,8 @@
 
 Physics: a double integrator whose acceleration follows the commanded one through a first-order lag (the
 attitude loop), with PX4-like velocity and acceleration limits. Autopilot: PX4's cascaded position controller
-(position P -> velocity set-point with feed-forward -> velocity P -> acceleration), with its modes (takeoff,
+(position P -> velocity set-point with feed-forward -> velocity P -> acceleration, plus the set-point's
+acceleration feed-forward, as PX4's trajectory set-points have it), with its modes (takeoff,
 hold, offboard, land), the offboard-loss failsafe (no set-point for 0.5 s -> hold), a rate-limited yaw that
 follows the command, armed/in-air flags and a slowly draining battery with PX4's kind of battery failsafe
 (at `battery_land_fraction` it lands where it is, out of skyring's control, and refuses to arm again). The
@@ -10,8 +11,9 @@ autopilot only knows the GPS position, which drifts (`GpsDrift`): it flies the d
 reported positions differ.
 
 Gains are PX4's defaults (MPC_XY_P 0.95, MPC_XY_VEL_P_ACC 1.8, MPC_Z_P 1, MPC_Z_VEL_P_ACC 4); with the
-attitude lag they give the way-point tracking error of about 1 m the paper reports (e_max) when the set-point
-accelerates at the MPC's input bound.
+attitude lag and no acceleration feed-forward they give the way-point tracking error of about 1 m the paper
+reports (e_max) when the set-point accelerates at the MPC's input bound; the feed-forward takes most of it
+away (tests/vehicles/sim/test_sim_autopilot.py).
 """
 
 from __future__ import annotations
@@ -117,6 +119,7 @@ class SimAutopilot:
         self._target = list(self._pos)  # believed-frame position target of hold/takeoff/land
         self._sp_pos = list(self._pos)
         self._sp_vel = [0.0, 0.0, 0.0]
+        self._sp_acc = [0.0, 0.0, 0.0]
         self._sp_time = -math.inf
         self._state: AutopilotState | None = None
         self._cov = frozen_array(np.diag(np.square(params.position_std_m)), (3, 3), "position_cov_m2")
@@ -169,6 +172,7 @@ class SimAutopilot:
             return
         self._sp_pos = [float(v) for v in setpoint.position_m]
         self._sp_vel = [float(v) for v in setpoint.velocity_mps]
+        self._sp_acc = [float(v) for v in setpoint.acceleration_mps2]
         self._yaw_cmd = float(setpoint.yaw_rad)
         self._sp_time = self._t
         self._set_mode(FlightMode.OFFBOARD)
@@ -351,9 +355,10 @@ class SimAutopilot:
             self._acc = [0.0, 0.0, 0.0]
             self._vel = [0.0, 0.0, 0.0]
             return
-        ax = p.velocity_gain_xy * (vcmd[0] - self._vel[0])
-        ay = p.velocity_gain_xy * (vcmd[1] - self._vel[1])
-        az = p.velocity_gain_z * (vcmd[2] - self._vel[2])
+        aff = self._sp_acc if self._mode == FlightMode.OFFBOARD else (0.0, 0.0, 0.0)
+        ax = aff[0] + p.velocity_gain_xy * (vcmd[0] - self._vel[0])
+        ay = aff[1] + p.velocity_gain_xy * (vcmd[1] - self._vel[1])
+        az = aff[2] + p.velocity_gain_z * (vcmd[2] - self._vel[2])
         ax, ay = _clip_norm2(ax, ay, p.max_accel_xy_mps2)
         az = max(-p.max_accel_down_mps2, min(p.max_accel_up_mps2, az))
         k = min(dt / p.attitude_lag_s, 1.0)

@@ -23,15 +23,18 @@ from vehicles.px4.geodesy import GeodeticPoint, LocalFrame, geodetic_to_enu
 REF = GeodeticPoint(47.397742, 8.545594, 488.0)
 
 
-def setpoint(position, velocity=(0.0, 0.0, 0.0), yaw=0.0):
-    return Setpoint(stamp_s=0.0, position_m=position, velocity_mps=velocity, yaw_rad=yaw)
+def setpoint(position, velocity=(0.0, 0.0, 0.0), yaw=0.0, acceleration=(0.0, 0.0, 0.0)):
+    return Setpoint(
+        stamp_s=0.0, position_m=position, velocity_mps=velocity, yaw_rad=yaw, acceleration_mps2=acceleration
+    )
 
 
 def test_setpoint_at_the_reference_swaps_axes_and_flips_up():
     frame = LocalFrame.from_origin(local_origin=REF, reference=REF)
-    ned = ned_setpoint(setpoint([10.0, 20.0, 8.0], [1.0, -2.0, 0.5]), frame)
+    ned = ned_setpoint(setpoint([10.0, 20.0, 8.0], [1.0, -2.0, 0.5], acceleration=[0.3, -0.4, 1.5]), frame)
     np.testing.assert_allclose(ned.position_ned_m, [20.0, 10.0, -8.0], atol=1e-9)
     np.testing.assert_allclose(ned.velocity_ned_mps, [-2.0, 1.0, -0.5], atol=1e-12)
+    np.testing.assert_allclose(ned.acceleration_ned_mps2, [-0.4, 0.3, -1.5], atol=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -87,8 +87,11 @@ async def wait_until(condition, *, timeout_s: float, what: str) -> float:
 class StandInAgent:
     """Stands in for a formation agent: one set-point to a fixed ENU target every period_s until frozen."""
 
-    def __init__(self, autopilot, target_m, *, yaw_rad: float = 0.0, period_s: float = 0.1) -> None:
+    def __init__(
+        self, autopilot, target_m, *, yaw_rad: float = 0.0, period_s: float = 0.1, acceleration_mps2=(0, 0, 0)
+    ) -> None:
         self.autopilot, self.target_m, self.yaw_rad, self.period_s = autopilot, target_m, yaw_rad, period_s
+        self.acceleration_mps2 = np.asarray(acceleration_mps2, dtype=float)
         self.frozen = False
         self._task = asyncio.get_running_loop().create_task(self._run())
 
@@ -101,6 +104,7 @@ class StandInAgent:
                         position_m=self.target_m,
                         velocity_mps=np.array((0.0, 0.0, 0.0)),
                         yaw_rad=self.yaw_rad,
+                        acceleration_mps2=self.acceleration_mps2,
                     )
                 )
             await asyncio.sleep(self.period_s)
@@ -109,14 +113,28 @@ class StandInAgent:
         self._task.cancel()
 
 
-async def engaged(autopilot, target_m, *, yaw_rad: float = 0.0) -> StandInAgent:
+async def engaged(autopilot, target_m, *, yaw_rad: float = 0.0, acceleration_mps2=(0, 0, 0)) -> StandInAgent:
     """Take off and follow a stand-in agent; returns once the vehicle flies in offboard."""
     autopilot.takeoff(4.0)
-    agent = StandInAgent(autopilot, target_m, yaw_rad=yaw_rad)
+    agent = StandInAgent(autopilot, target_m, yaw_rad=yaw_rad, acceleration_mps2=acceleration_mps2)
     await wait_until(
         lambda: autopilot.status().engagement == "following", timeout_s=20.0, what="engaging offboard"
     )
     return agent
+
+
+async def test_the_setpoints_acceleration_feed_forward_reaches_the_vehicle_in_ned():
+    async with px4_fleet([home_at(0, 0)]) as (fleet, (peer,)):
+        agent = await engaged(
+            fleet.autopilots[0], np.array([0.0, 0.0, 4.0]), acceleration_mps2=(0.5, -0.25, 0.1)
+        )
+        await asyncio.sleep(0.5)
+        agent.stop()
+        seen = peer.setpoints()
+        assert [p for sp in seen for p in setpoint_problems(sp, system_id=1)] == []
+        np.testing.assert_allclose(
+            seen[-1].acceleration_ned, [-0.25, 0.5, -0.1], atol=1e-6
+        )  # float32 on the wire
 
 
 async def test_connect_sets_the_failsafe_parameters_on_the_vehicle():

@@ -112,6 +112,49 @@ def test_tracking_a_circle_lags_like_a_real_position_controller(speed, low, high
     assert low < np.mean(errors) < high
 
 
+def test_the_acceleration_feed_forward_takes_the_lag_out_of_tracking_a_circle():
+    """With the centripetal acceleration fed forward (as skyring sends the plan's), the cascade no longer has
+    to fall behind to build it up: at 4 m/s on the 8 m circle the lag drops from about 1.2 m (the test above)
+    to what the attitude lag leaves, 0.12 m."""
+    ap, t = _airborne()
+    centre = ap.true_position_m - np.array([8.0, 0.0, 0.0])
+    w = 4.0 / 8.0
+    t0 = t
+
+    def sp(t):
+        a = w * (t - t0)
+        radial = np.array([math.cos(a), math.sin(a), 0.0])
+        return Setpoint(
+            stamp_s=t,
+            position_m=centre + 8.0 * radial,
+            velocity_mps=4.0 * np.array([-math.sin(a), math.cos(a), 0.0]),
+            yaw_rad=0.0,
+            acceleration_mps2=-(4.0**2 / 8.0) * radial,
+        )
+
+    t, log = _run(ap, t, 30.0, sp)
+    errors = [np.linalg.norm(p - sp(tt).position_m) for tt, p, _ in log[1500:]]
+    assert np.mean(errors) < 0.2
+
+
+def test_the_acceleration_feed_forward_only_counts_in_offboard():
+    """Hold ignores the last offboard set-point's acceleration: the vehicle rests where it is."""
+    ap, t = _airborne()
+    here = ap.true_position_m
+    push = Setpoint(
+        stamp_s=t,
+        position_m=here,
+        velocity_mps=np.zeros(3),
+        yaw_rad=0.0,
+        acceleration_mps2=np.array([3.0, 0, 0]),
+    )
+    ap.send_setpoint(push)
+    ap.hold()
+    t, _ = _run(ap, t, 3.0)
+    assert ap.state().mode == FlightMode.HOLD
+    np.testing.assert_allclose(ap.true_position_m, here, atol=0.05)
+
+
 def test_lost_setpoint_stream_falls_back_to_hold_after_half_a_second():
     ap, t = _airborne()
     goal = ap.true_position_m + np.array([1.0, 0.0, 0.0])
