@@ -240,8 +240,8 @@ def separation_rows(
     own_path_m, own_velocities_mps: (S, 3) our previous plan on the horizon, starting at the start state;
     mate_ages_s (J,): each teammate plan's age; inflation_m (J,): what each row grows by (m).
     The rows constrain plan step n = 1..S-1 (the MPC's x(n); x(0) is the start state). lag_m (3,): where
-    the vehicle is less where its plan starts (the follower lags the plan, up to the leash); every row is
-    tightened by the lag's part towards its plane, so it holds for the vehicle rather than for the plan.
+    the vehicle is less where its plan starts (the follower lags the plan, up to the leash); every trunk row
+    is tightened by the lag's part towards its plane, so it holds for the vehicle rather than for the plan.
     compiled: build them with separation_kernel.py's kernels (the default) or with the numpy reference here.
     """
     cooperative = mates.in_formation & (mate_ages_s <= params.cooperative_age_s)
