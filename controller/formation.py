@@ -481,24 +481,27 @@ class FormationController:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Where an escape aims: rest at the start position, moved vertically away from the closest
         teammate when it is within separation_m horizontally (up when level or above it), inside the arena."""
-        mp = self._mpc_params
-        target = tick.start_p.copy()
+        height = float(tick.start_p[2])
         j = rows.closest_teammate_index
         if j >= 0:
             mate = mates.positions_m[j, 0]
             gap = tick.start_p - mate
             if math.hypot(gap[0], gap[1]) < self._params.separation.separation_m:
                 climb = self._params.separation.escape_climb_m
-                target[2] = mate[2] + (climb if gap[2] >= 0.0 else -climb)
-        return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
+                height = mate[2] + (climb if gap[2] >= 0.0 else -climb)
+        return self._rest_at(tick, height)
 
     def _hold_target(
         self, tick: _Tick, person: PersonEstimate, formation: FormationParams
     ) -> tuple[np.ndarray, np.ndarray]:
         """Where a hold aims: rest at the start position, at h_des above the person, inside the arena."""
+        return self._rest_at(tick, float(person.position_m[2]) + formation.h_des_m)
+
+    def _rest_at(self, tick: _Tick, height_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """A resting aim (zero velocity) above the start position at height_m, clipped into the arena."""
         mp = self._mpc_params
         target = tick.start_p.copy()
-        target[2] = float(person.position_m[2]) + formation.h_des_m
+        target[2] = height_m
         return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
 
     def _previous_plan_on_horizon(self, now_s: float) -> tuple[np.ndarray, np.ndarray]:
