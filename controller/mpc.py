@@ -34,7 +34,15 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from controller.mpc_kernels import CLOSED_FORM, INVALID, NEEDS_SOLVER, half_plane_rows, rollout, solve_fast
+from controller.mpc_kernels import (
+    CLOSED_FORM,
+    INVALID,
+    NEEDS_SOLVER,
+    half_plane_rows,
+    plane_shortfall,
+    rollout,
+    solve_fast,
+)
 from controller.qp import ExactQp
 
 EFFORT_MODES = ("hover", "planned", "raw")
@@ -621,12 +629,20 @@ class ModelPredictiveController:
         q[-1] = prm.half_plane_weight  # the kernel set every slack's weight to slack_weight
         extra: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[None, None, None] = (None, None, None)
         fixed_rows_ok = False  # whether the closed form satisfied every fixed row (then only extras failed)
+        shortfall = -np.inf  # the plan's largest shortfall from the half-planes (m)
         if half_planes is not None:
-            if not (np.all(np.isfinite(half_planes[1])) and np.all(np.isfinite(half_planes[2]))):
+            if verdict == CLOSED_FORM:
+                # The closed form's plan is checked against the half-planes themselves: its slack w rests at
+                # 0, so a^T p(n) >= b is the row a^T G z + w >= b - a^T h, and no row need be built for it.
+                shortfall = plane_shortfall(half_planes[0], half_planes[1], half_planes[2], positions)
+                if not shortfall == shortfall:  # NaN: a normal or an offset is not finite
+                    return None
+                if shortfall > 1e-9:
+                    verdict, fixed_rows_ok = NEEDS_SOLVER, True
+            elif not (np.all(np.isfinite(half_planes[1])) and np.all(np.isfinite(half_planes[2]))):
                 return None
-            extra = self._half_plane_rows_compiled(half_planes, position_m, velocity_mps, f)
-            if verdict == CLOSED_FORM and (extra[0] @ z < extra[1] - 1e-9).any():
-                verdict, fixed_rows_ok = NEEDS_SOLVER, True
+            if verdict != CLOSED_FORM:
+                extra = self._half_plane_rows_compiled(half_planes, position_m, velocity_mps, f)
         path, iterations, time_s = "closed_form", 0, 0.0
         if verdict != CLOSED_FORM:
             result = qp.finish(q, lo, hi, fixed_rows_ok, z, rows, gradient, *extra)
@@ -651,9 +667,11 @@ class ModelPredictiveController:
                 positions,
                 velocities,
             )
+            if half_planes is not None:
+                shortfall = plane_shortfall(half_planes[0], half_planes[1], half_planes[2], positions)
         if not np.isfinite(violation):
             return self._failure("non_finite_plan", "the plan is not finite", iterations)
-        plane_violation = 0.0 if half_planes is None else _plane_violation(half_planes, positions)
+        plane_violation = max(0.0, shortfall)
         for arr in (inputs, positions, velocities):
             arr.setflags(write=False)  # handed on (e.g. into a HorizonPlan) without a copy
         return MpcSolution(

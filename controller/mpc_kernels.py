@@ -242,3 +242,21 @@ def half_plane_rows(
             ) + az * input_to_state[first + 2, j]
         rows[r, last] = soft[r]
         lower[r] = offsets[r] - ((ax * free[first] + ay * free[first + 1]) + az * free[first + 2])
+
+
+@numba.njit(cache=True)
+def plane_shortfall(
+    steps: np.ndarray, normals: np.ndarray, offsets: np.ndarray, positions: np.ndarray
+) -> float:  # pragma: no cover - compiled; tested against the numpy form in tests/controller/test_mpc.py
+    """Largest shortfall b - a^T p(n) (m; <= 0 when every half-plane holds) of a plan's positions (N+2, 3)
+    from half-planes with steps (R,) in 1..N+1, normals (R, 3) and offsets (R,); NaN when a normal or an
+    offset is not finite, -inf for no rows. The closed form's check of the half-planes: when its plan meets
+    them, no row of them need be built (docs/fast-core.md#extra-constraints-half-planes)."""
+    worst = -np.inf
+    for r in range(steps.shape[0]):
+        p = positions[steps[r]]
+        ax, ay, az, b = normals[r, 0], normals[r, 1], normals[r, 2], offsets[r]
+        if not (abs(ax) < np.inf and abs(ay) < np.inf and abs(az) < np.inf and abs(b) < np.inf):
+            return np.nan
+        worst = max(worst, b - ((ax * p[0] + ay * p[1]) + az * p[2]))
+    return worst

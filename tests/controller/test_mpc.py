@@ -12,9 +12,11 @@ from controller.mpc import (
     ModelPredictiveController,
     MpcParams,
     MpcSolution,
+    _plane_violation,
     braking_plan,
     predict,
 )
+from controller.mpc_kernels import plane_shortfall
 
 PARAMS = MpcParams()
 OSQP = MpcParams(solver="osqp")  # for the tests of OSQP's own behaviour (iterations, warm starts)
@@ -518,3 +520,30 @@ def test_compiled_half_plane_rows_are_the_numpy_rows_bit_for_bit():
         compiled = controller._half_plane_rows_compiled(planes, position, velocity, external)
         for ref, fast in zip(reference, compiled, strict=True):
             np.testing.assert_array_equal(fast, ref)
+
+
+def test_compiled_plane_shortfall_is_the_numpy_violation():
+    """mpc_kernels.plane_shortfall against `_plane_violation` on 200 random plans and sets of 1-120 tilted
+    half-planes: the same largest shortfall (positive when a row fails), so the closed form's check of the
+    half-planes agrees with the violation the solution reports."""
+    rng = np.random.default_rng(8)
+    failing = 0
+    for _ in range(200):
+        count = int(rng.integers(1, 121))
+        steps = rng.integers(1, STEPS + 1, count).astype(np.int64)  # 1..N+1
+        normals, positions = rng.normal(size=(count, 3)), rng.normal(scale=10.0, size=(N + 2, 3))
+        offsets = np.einsum("ri,ri->r", normals, positions[steps]) - rng.uniform(0.0, 1.0, count)
+        if rng.random() < 0.5:  # one row fails by up to 2 m
+            offsets[rng.integers(count)] += rng.uniform(1.0, 3.0)
+        shortfall = plane_shortfall(steps, normals, offsets, positions)
+        reference = _plane_violation((steps, normals, offsets, np.ones(count)), positions)
+        assert max(0.0, shortfall) == pytest.approx(reference, rel=1e-12, abs=1e-12)
+        failing += shortfall > 0.0
+    assert 50 < failing < 150  # both verdicts were exercised
+
+
+def test_plane_shortfall_is_nan_for_a_non_finite_half_plane():
+    positions = np.zeros((N + 2, 3))
+    steps, normals = np.array([1, 2], dtype=np.int64), np.array([[1.0, 0.0, 0.0], [0.0, np.inf, 0.0]])
+    assert np.isnan(plane_shortfall(steps, normals, np.array([-1.0, -1.0]), positions))
+    assert np.isnan(plane_shortfall(steps[:1], normals[:1], np.array([np.nan]), positions))
