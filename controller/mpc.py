@@ -172,6 +172,13 @@ def _plane_violation(planes: Planes, positions: np.ndarray) -> float:
     return max(0.0, float((offsets - np.einsum("ri,ri->r", normals, positions[steps])).max()))
 
 
+def _shortfall(planes: Planes, positions: np.ndarray) -> float:
+    """`_plane_violation` by the compiled kernel, unclipped: <= 0 when every half-plane holds, NaN when one
+    is not finite (mpc_kernels.plane_shortfall)."""
+    steps, normals, offsets, _ = planes
+    return plane_shortfall(steps, normals, offsets, positions)
+
+
 @dataclass(frozen=True, eq=False)
 class MpcSolution:
     """One MPC solve (N = horizon_steps). When not ok, the arrays are NaN: apply `braking_plan` instead."""
@@ -634,7 +641,7 @@ class ModelPredictiveController:
             if verdict == CLOSED_FORM:
                 # The closed form's plan is checked against the half-planes themselves: its slack w rests at
                 # 0, so a^T p(n) >= b is the row a^T G z + w >= b - a^T h, and no row need be built for it.
-                shortfall = plane_shortfall(half_planes[0], half_planes[1], half_planes[2], positions)
+                shortfall = _shortfall(half_planes, positions)
                 if not shortfall == shortfall:  # NaN: a normal or an offset is not finite
                     return None
                 if shortfall > 1e-9:
@@ -668,7 +675,7 @@ class ModelPredictiveController:
                 velocities,
             )
             if half_planes is not None:
-                shortfall = plane_shortfall(half_planes[0], half_planes[1], half_planes[2], positions)
+                shortfall = _shortfall(half_planes, positions)
         if not np.isfinite(violation):
             return self._failure("non_finite_plan", "the plan is not finite", iterations)
         plane_violation = max(0.0, shortfall)
