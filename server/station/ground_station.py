@@ -25,6 +25,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -70,6 +71,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 AUDIT_MEMORY = 1000  # audit records kept in memory (the flight log keeps them all)
+# a real-time station whose control loop has not ticked for this long stalled (the process was stopped or
+# starved); a reader then waits up to STALL_WAIT_S for the next tick, not to show the team before the stall
+STALL_AFTER_S = 0.5
+STALL_WAIT_S = 1.0
 
 
 class NotAuthorisedError(CommandError):
@@ -184,6 +189,8 @@ class GroundStation:
         self._wall_clock = wall_clock
         self._origin = origin
         self._pace: PaceView | None = None
+        self._ticker: int | None = None  # the thread that ticks (it never waits for its own tick)
+        self._tick_done = threading.Condition(threading.Lock())
 
     # ---- time ---------------------------------------------------------------------------------------------
     @property
@@ -211,6 +218,7 @@ class GroundStation:
     def tick(self) -> None:
         """Run one control tick of the whole team, one control period after the previous one."""
         with self._lock:
+            self._ticker = threading.get_ident()
             now = self._time + self._period if self._clock is None else max(self._clock(), self._time)
             self._time = now
             self._changed()
@@ -219,6 +227,8 @@ class GroundStation:
                 self._read_alerts(now)
             if self._log is not None and self._log.sample_due(now):
                 self._log.record_sample(self.scene_view)
+        with self._tick_done:
+            self._tick_done.notify_all()
 
     # ---- flight log ---------------------------------------------------------------------------------------
     def attach_log(self, flight_log: FlightLog) -> None:
@@ -317,7 +327,27 @@ class GroundStation:
             return self._snapshot
 
     def scene_view(self) -> SceneView:
-        """What the operator sees now (cached until the next tick or command)."""
+        """What the operator sees now (cached until the next tick or command). After a stall of the control
+        loop it is the first tick's after the stall; a loop still stalled after STALL_WAIT_S shows no vehicle
+        in formation, each with the stall as its fault (the station commands nothing while it stands)."""
+        if self._stalled_s() is not None:
+            with self._tick_done:  # without the station's lock, which the tick needs
+                if self._stalled_s() is not None:
+                    self._tick_done.wait(timeout=STALL_WAIT_S)
+        with self._lock:
+            stalled_s = self._stalled_s()
+            view = self._fresh_view()
+            return view if stalled_s is None else _stalled_view(view, stalled_s)
+
+    def _stalled_s(self) -> float | None:
+        """How long a real-time station's control loop has not ticked, when past STALL_AFTER_S and asked from
+        another thread than the one that ticks; None otherwise."""
+        if self._clock is None or self._ticker in (None, threading.get_ident()):
+            return None
+        stalled_s = self._clock() - self._time
+        return stalled_s if stalled_s > STALL_AFTER_S else None
+
+    def _fresh_view(self) -> SceneView:
         with self._lock:
             if self._view is None:
                 self._view = scene_view(
@@ -575,6 +605,13 @@ class GroundStation:
     def _changed(self) -> None:
         self._snapshot = None
         self._view = None
+
+
+def _stalled_view(view: SceneView, stalled_s: float) -> SceneView:
+    """The view of a station whose control loop stands: no vehicle flies in formation, and each says why."""
+    fault = f"the ground station's control loop has not run for {stalled_s:.1f} s"
+    vehicles = tuple(replace(v, in_formation=False, fault=fault) for v in view.vehicles)
+    return replace(view, vehicles=vehicles)
 
 
 def camera_view(params: CameraParams) -> CameraView:

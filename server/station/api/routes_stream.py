@@ -113,7 +113,8 @@ class StateFeed:
 
     async def _run(self) -> None:
         while self._listeners > 0:
-            self._frame = scene_json(self._station.scene_view())
+            view = await asyncio.to_thread(self._station.scene_view)  # it may wait out a stall
+            self._frame = scene_json(view)
             self._seq += 1
             self._changed.set()
             self._changed = asyncio.Event()
