@@ -259,7 +259,12 @@ def test_a_stalled_station_shows_px4s_failsafe_and_no_vehicle_in_formation_while
     sampler.close()
     for i in down:
         # no vehicle is shown in formation while PX4 is landing it, from the first answer after the stall
-        assert not any(vs[i]["in_formation"] for _, vs, modes in seen if modes[i] == "LAND"), i
+        shown = [
+            (round(t - thawed, 2), vs[i]["phase"])
+            for t, vs, modes in seen
+            if modes[i] == "LAND" and vs[i]["in_formation"]
+        ]
+        assert not shown, (i, shown)  # (seconds after the thaw, phase) of every answer that said so
         # it is shown landing in a failsafe, with the reason, until it is down (PX4's heartbeat comes once a
         # second: the view may take that long to catch up with the stall)
         landing = [vs[i] for t, vs, modes in seen if modes[i] == "LAND" and t - thawed >= 1.5]
