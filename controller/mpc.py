@@ -73,7 +73,7 @@ class MpcParams:
     admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
     solution, non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
-    half_plane_weight, half_plane_quadratic_weight: the exact (L-infinity) penalty per m of the largest
+    half_plane_weight, half_plane_quadratic_weight: the exact penalty per m of each plan step's largest
     violation of the soft half-planes a solve may be given (`HalfPlanes`), and its quadratic companion; far
     above slack_weight, so a half-plane gives way only when it cannot hold.
     """
@@ -150,10 +150,12 @@ class HalfPlanes:
     A generic hook for constraints built outside the MPC (e.g. separation half-planes); they enter the QP as
     extra rows on the condensed inputs (docs/fast-core.md#extra-constraints-half-planes).
 
-    soft: (R,) bool, None = every row soft. Soft rows share one slack w >= 0 with an exact penalty
-    (MpcParams.half_plane_weight): a^T x(n) + w >= b, so they never make the QP infeasible and hold exactly
-    whenever they all can. Hard rows have no slack: if they cannot hold the solve fails (ok=False, status
-    "infeasible") and the caller brakes or escapes."""
+    soft: (R,) bool, None = every row soft. The soft rows of plan step n share one slack w(n) >= 0 with an
+    exact penalty (MpcParams.half_plane_weight): a^T x(n) + w(n) >= b, so they never make the QP infeasible
+    and hold exactly whenever they all can. Shared within a step, the rows of that step give way evenly (no
+    teammate's is traded for another's); one per step, a step whose rows cannot hold lets no other step's give
+    way (docs/safety.md, "One slack per plan step"). Hard rows have no slack: if they cannot hold the solve
+    fails (ok=False, status "infeasible") and the caller brakes or escapes."""
 
     steps: np.ndarray
     normals_xy: np.ndarray
@@ -316,14 +318,16 @@ class ModelPredictiveController:
         self._p_rows, self._p_cols, self._p_indptr = self._p_pattern()
         self._shifts = [self._shift_permutations(k) for k in range(m)]
         self._exact = params.solver == "exact"
-        # The exact solver's QP has one more variable: the half-planes' shared slack w (last), with w >= 0.
-        self._n_exact = self._n_var + 1
+        # The exact solver's QP has one more variable per plan step: the slack w(n) >= 0 shared by the
+        # half-planes on step n (last, steps 1..N+1 in order).
+        self._n_exact = self._n_var + m
         a_dense = self._a_matrix.toarray()
-        self._a_exact = np.zeros((a_dense.shape[0] + 1, self._n_exact))
-        self._a_exact[:-1, :-1] = a_dense
-        self._a_exact[-1, -1] = 1.0
-        self._l_exact = np.append(self._l_template, 0.0)
-        self._u_exact = np.append(self._u_template, np.inf)
+        self._a_exact = np.zeros((a_dense.shape[0] + m, self._n_exact))
+        self._a_exact[:-m, :-m] = a_dense
+        self._a_exact[-m:, -m:] = np.eye(m)
+        self._l_exact = np.append(self._l_template, np.zeros(m))
+        self._u_exact = np.append(self._u_template, np.full(m, np.inf))
+        self._slack_hessian = 2.0 * params.half_plane_quadratic_weight * np.eye(m)
         self._resting = np.arange(self._n_exact) >= self._nu
         self._state_min_c = np.ascontiguousarray(self._state_min)
         self._state_max_c = np.ascontiguousarray(self._state_max)
@@ -439,7 +443,7 @@ class ModelPredictiveController:
         p = np.zeros((self._n_exact, self._n_exact))
         p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
         p = p + np.triu(p, 1).T
-        p[-1, -1] = 2.0 * self._params.half_plane_quadratic_weight
+        p[self._n_var :, self._n_var :] = self._slack_hessian
         return ExactQp(p, self._a_exact, self._resting, iteration_limit=self._params.max_iterations)
 
     def _setup_solver(self) -> None:
@@ -534,9 +538,9 @@ class ModelPredictiveController:
         velocity: np.ndarray,
         f: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The half-planes as extra rows of the exact QP: a^T G_p(n) u + w >= b - a^T h_p(n), with G_p(n) the
-        position rows of the input-to-state map at step n, h the free response, w the shared slack (last
-        variable; a hard row has 0 there). Returns (rows (R, n), lower (R,), upper (R,))."""
+        """The half-planes as extra rows of the exact QP: a^T G_p(n) u + w(n) >= b - a^T h_p(n), with G_p(n)
+        the position rows of the input-to-state map at step n, h the free response, w(n) step n's slack (one
+        of the last N+1 variables; a hard row has 0 there). Returns (rows (R, n), lower (R,), upper (R,))."""
         steps, normals, offsets, soft = planes
         free = self._free_response(np.concatenate([position, velocity]), f)
         first = 6 * (steps - 1)  # the x row of step n in the stacked states; y, z are the next two
@@ -546,7 +550,7 @@ class ModelPredictiveController:
             + normals[:, 1:2] * self._input_to_state[first + 1]
             + normals[:, 2:3] * self._input_to_state[first + 2]
         )
-        rows[:, -1] = soft
+        rows[np.arange(len(steps)), self._n_var + steps - 1] = soft
         lower = offsets - (
             normals[:, 0] * free[first] + normals[:, 1] * free[first + 1] + normals[:, 2] * free[first + 2]
         )
@@ -633,14 +637,14 @@ class ModelPredictiveController:
         )
         if verdict == INVALID:
             return None
-        q[-1] = prm.half_plane_weight  # the kernel set every slack's weight to slack_weight
+        q[self._n_var :] = prm.half_plane_weight  # the kernel set every slack's weight to slack_weight
         extra: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[None, None, None] = (None, None, None)
         fixed_rows_ok = False  # whether the closed form satisfied every fixed row (then only extras failed)
         shortfall = -np.inf  # the plan's largest shortfall from the half-planes (m)
         if half_planes is not None:
             if verdict == CLOSED_FORM:
-                # The closed form's plan is checked against the half-planes themselves: its slack w rests at
-                # 0, so a^T p(n) >= b is the row a^T G z + w >= b - a^T h, and no row need be built for it.
+                # The closed form's plan is checked against the half-planes themselves: its slacks rest at 0,
+                # so a^T p(n) >= b is the row a^T G z + w(n) >= b - a^T h, and no row need be built for it.
                 shortfall = _shortfall(half_planes, positions)
                 if not shortfall == shortfall:  # NaN: a normal or an offset is not finite
                     return None
@@ -704,14 +708,14 @@ class ModelPredictiveController:
         arrays: dict[str, np.ndarray],
         w_terminal: np.ndarray,
     ):
-        """OSQP on the QP with the half-planes' rows and their shared slack w (the exact solver's problem),
+        """OSQP on the QP with the half-planes' rows and their slacks w(n) (the exact solver's problem),
         set up for this solve alone (its rows change every solve); the result's x and y are cut back to
         the problem without them, so the caller treats it like the warm-started solver's result."""
         prm = self._params
         n = self._n_exact
         p = np.zeros((n, n))
         p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
-        p[-1, -1] = 2.0 * prm.half_plane_quadratic_weight
+        p[self._n_var :, self._n_var :] = self._slack_hessian
         extra, extra_lo, extra_hi = self._half_plane_rows(
             planes, arrays["position_m"], arrays["velocity_mps"], arrays["external_inputs_mps2"]
         )
@@ -719,10 +723,10 @@ class ModelPredictiveController:
         solver = osqp.OSQP()
         solver.setup(
             sp.csc_matrix(np.triu(p)),
-            np.append(q, prm.half_plane_weight),
+            np.append(q, np.full(self._n_steps, prm.half_plane_weight)),
             a,
-            np.concatenate([lo, [0.0], extra_lo]),
-            np.concatenate([hi, [np.inf], extra_hi]),
+            np.concatenate([lo, np.zeros(self._n_steps), extra_lo]),
+            np.concatenate([hi, np.full(self._n_steps, np.inf), extra_hi]),
             eps_abs=prm.eps_abs,
             eps_rel=prm.eps_rel,
             max_iter=prm.max_iterations,

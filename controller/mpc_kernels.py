@@ -228,11 +228,12 @@ def half_plane_rows(
     lower: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; tested against ModelPredictiveController._half_plane_rows
     """Write the half-planes' rows (R, n) and lower bounds (R,) of the exact QP, as `_half_plane_rows`: row r
-    is a^T G_p(n) on the inputs and soft_r on the last variable, its bound b - a^T h_p(n); input_to_state
-    (6(N+1), 3(N+1)), free (6(N+1),) the free response, steps (R,) in 1..N+1, normals (R, 3). rows must be
-    zero beyond the inputs and the last column. Same order of operations as the numpy form: same bits."""
+    is a^T G_p(n) on the inputs and soft_r on step n's slack (one of the last N+1 columns), its bound
+    b - a^T h_p(n); input_to_state (6(N+1), 3(N+1)), free (6(N+1),) the free response, steps (R,) in 1..N+1,
+    normals (R, 3). rows must be zero beyond the inputs and the slacks' columns. Same order of operations as
+    the numpy form: same bits."""
     nu = input_to_state.shape[1]
-    last = rows.shape[1] - 1
+    slack0 = rows.shape[1] - nu // 3 - 1  # the column of the slack of step n is slack0 + n
     for r in range(steps.shape[0]):
         first = 6 * (steps[r] - 1)
         ax, ay, az = normals[r, 0], normals[r, 1], normals[r, 2]
@@ -240,7 +241,7 @@ def half_plane_rows(
             rows[r, j] = (
                 ax * input_to_state[first, j] + ay * input_to_state[first + 1, j]
             ) + az * input_to_state[first + 2, j]
-        rows[r, last] = soft[r]
+        rows[r, slack0 + steps[r]] = soft[r]
         lower[r] = offsets[r] - ((ax * free[first] + ay * free[first + 1]) + az * free[first + 2])
 
 

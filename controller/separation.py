@@ -62,9 +62,10 @@ class SeparationParams:
     plan_deviation_mps2: how fast a teammate's newest plan can part from the last one we heard (two
         vehicles' 4 m/s^2): a plan t old is off by at most plan_deviation_mps2 t^2 / 2, or the speed bound
         times its age, whichever is less (`age_margin_m`).
-    obstacle_row_weight: a trunk row is this many times a teammate row (its normal and offset scaled): all
-        rows share the QP's one slack, the largest weighted violation, so when rows cannot all hold the plan
-        gives way to a teammate (who also moves away) before a trunk (which does not).
+    obstacle_row_weight: a trunk row is this many times a teammate row (its normal and offset scaled): the
+        rows of a plan step share the QP's slack for that step, their largest weighted violation, so when
+        rows cannot all hold the plan gives way to a teammate (who also moves away) before a trunk (which
+        does not).
     """
 
     enabled: bool = True

@@ -127,7 +127,8 @@ def _fly(team_size: int, ticks: int, *, record: bool, capture: bool = False):
 
 def _cvxpy_problem(params: MpcParams, max_rows: int):
     """The MPC's QP written from the equations with CVXPY parameters (states as variables), built once, with
-    room for max_rows half-plane rows (unused rows are 0 >= -1): a^T p(n) + soft w >= b, w >= 0."""
+    room for max_rows half-plane rows (unused rows are 0 >= -1): a^T p(n) + soft w(n) >= b, w >= 0, one slack
+    w(n) per plan step."""
     import cvxpy as cp  # a test extra: imported only when this benchmark runs
 
     dt, m = params.dt_s, params.horizon_steps + 1
@@ -137,9 +138,10 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
     f = cp.Parameter((m, 3))
     rows = max(int(max_rows), 1)
     coeffs = cp.Parameter((rows, 3 * (m + 1)))  # row r's normal at the columns of p(steps[r]), row-major
-    offsets, soft = cp.Parameter(rows), cp.Parameter(rows, nonneg=True)
+    offsets = cp.Parameter(rows)
+    slack_of_row = cp.Parameter((rows, m), nonneg=True)  # soft_r at the column of row r's step
     u, p, v, s = cp.Variable((m, 3)), cp.Variable((m + 1, 3)), cp.Variable((m + 1, 3)), cp.Variable(6)
-    w = cp.Variable()
+    w = cp.Variable(m)
     ones = np.ones((m, 1))
     acc = u + f + ones @ g[None, :]
     s_pos = ones @ cp.reshape(s[:3], (1, 3), order="C")
@@ -156,7 +158,7 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
         v[1:] <= ones @ np.atleast_2d(params.velocity_max_mps) + s_vel,
         v[1:] >= ones @ np.atleast_2d(params.velocity_min_mps) - s_vel,
         s >= 0,
-        coeffs @ cp.reshape(p, (3 * (m + 1),), order="C") + cp.multiply(soft, w) >= offsets,
+        coeffs @ cp.reshape(p, (3 * (m + 1),), order="C") + slack_of_row @ w >= offsets,
         w >= 0,
     ]
     cost = (
@@ -165,8 +167,8 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
         + params.terminal_velocity_weight * cp.sum_squares(v[m] - v_ref)
         + params.slack_weight * cp.sum(s)
         + params.slack_quadratic_weight * cp.sum_squares(s)
-        + params.half_plane_weight * w
-        + params.half_plane_quadratic_weight * cp.square(w)
+        + params.half_plane_weight * cp.sum(w)
+        + params.half_plane_quadratic_weight * cp.sum_squares(w)
     )
     problem = cp.Problem(cp.Minimize(cost), constraints)
 
@@ -174,7 +176,7 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
         x0.value, v0.value = case["position_m"], case["velocity_mps"]
         p_ref.value, v_ref.value = case["target_position_m"], case["target_velocity_mps"]
         f.value = case["external_inputs_mps2"]
-        c, b, sf = np.zeros((rows, 3 * (m + 1))), np.full(rows, -1.0), np.zeros(rows)
+        c, b, sf = np.zeros((rows, 3 * (m + 1))), np.full(rows, -1.0), np.zeros((rows, m))
         planes: HalfPlanes | None = case.get("half_planes")
         if planes is not None:
             n = len(planes.steps)
@@ -182,8 +184,9 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
             nz = np.zeros(n) if planes.normals_z is None else planes.normals_z
             np.put_along_axis(c[:n], cols, np.column_stack([planes.normals_xy, nz]), axis=1)
             b[:n] = planes.offsets
-            sf[:n] = 1.0 if planes.soft is None else np.asarray(planes.soft, dtype=float)
-        coeffs.value, offsets.value, soft.value = c, b, sf
+            soft = np.ones(n) if planes.soft is None else np.asarray(planes.soft, dtype=float)
+            sf[np.arange(n), np.asarray(planes.steps) - 1] = soft
+        coeffs.value, offsets.value, slack_of_row.value = c, b, sf
         options = dict(eps_abs=1e-10, eps_rel=1e-10, max_iter=200_000, polishing=True) if tight else {}
         c0, t0 = time.thread_time(), time.perf_counter()
         problem.solve(solver=solver, **options)

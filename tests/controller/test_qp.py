@@ -175,9 +175,10 @@ MPC_CASES = 200
 def cvxpy_mpc_reference(
     params: MpcParams, case: dict, planes: HalfPlanes | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The MPC's QP from the equations (states as variables, as in test_mpc.py) through CVXPY + OSQP at tight
-    tolerances with polishing. (Clarabel, an interior-point method, stops 1e-5..4e-4 away from the vertex
-    on these degenerate instances, inputs at their bounds, whatever its tolerances.)"""
+    """The MPC's QP from the equations (states as variables, as in test_mpc.py) through CVXPY + HiGHS, an
+    active-set QP solver, exact at the vertex. (Clarabel, an interior-point method, stops 1e-5..4e-4 away from
+    it on these degenerate instances, inputs at their bounds, whatever its tolerances; OSQP at 1e-11 with
+    polishing ends "inaccurate" on some instances with one half-plane slack per plan step.)"""
     dt, m = params.dt_s, params.horizon_steps + 1
     g = np.array([0.0, 0.0, -params.gravity_mps2])
     f = case["external_inputs_mps2"]
@@ -206,22 +207,16 @@ def cvxpy_mpc_reference(
         + params.slack_weight * cp.sum(s)
         + params.slack_quadratic_weight * cp.sum_squares(s)
     )
-    if planes is not None:  # the soft half-planes with their shared slack w
-        w = cp.Variable()
+    if planes is not None:  # the soft half-planes, with the slack w(n) shared by those of plan step n
+        steps = sorted({int(n) for n in planes.steps})
+        w = cp.Variable(len(steps))
         constraints += [w >= 0]
         normals_z = np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
         for n, a, a_z, b in zip(planes.steps, planes.normals_xy, normals_z, planes.offsets, strict=True):
-            constraints.append(a @ p[int(n), :2] + a_z * p[int(n), 2] + w >= b)
-        cost = cost + params.half_plane_weight * w + params.half_plane_quadratic_weight * cp.square(w)
+            constraints.append(a @ p[int(n), :2] + a_z * p[int(n), 2] + w[steps.index(int(n))] >= b)
+        cost += params.half_plane_weight * cp.sum(w) + params.half_plane_quadratic_weight * cp.sum_squares(w)
     problem = cp.Problem(cp.Minimize(cost), constraints)
-    problem.solve(
-        solver=cp.OSQP,
-        canon_backend=cp.SCIPY_CANON_BACKEND,
-        eps_abs=1e-11,
-        eps_rel=1e-11,
-        max_iter=500_000,
-        polishing=True,
-    )
+    problem.solve(solver=cp.HIGHS, canon_backend=cp.SCIPY_CANON_BACKEND)
     assert problem.status == cp.OPTIMAL
     assert u.value is not None and p.value is not None and v.value is not None
     return u.value, p.value, v.value
@@ -468,6 +463,39 @@ def test_hard_half_planes_that_cannot_hold_fail_the_solve():
     sol = controller.solve(**case, half_planes=hard)
     assert not sol.ok and sol.status == "infeasible"
     assert controller.solve(**case).ok  # and the next solve without them is unaffected
+
+
+def test_a_step_whose_rows_cannot_hold_lets_no_other_steps_rows_give_way():
+    """Each plan step has its own slack: a row at step 1 beyond any input's reach gives way, and a row at step
+    12 on another axis, which the free plan misses by 0.3 m, still holds exactly (with one slack shared by
+    every row it gave way by its whole 0.3 m, at no extra cost)."""
+    case = flight_case(np.random.default_rng(3))
+    controller = ModelPredictiveController(MpcParams())
+    free = controller.solve(**case).positions_m
+    planes = HalfPlanes(
+        steps=np.array([1, 12]),
+        normals_xy=np.array([[1.0, 0.0], [0.0, 1.0]]),
+        offsets=np.array([free[1, 0] + 5.0, free[12, 1] + 0.3]),
+    )
+    sol = controller.solve(**case, half_planes=planes)
+    assert sol.ok and sol.half_plane_violation_m > 4.0  # step 1's row gives way
+    assert sol.positions_m[12, 1] >= free[12, 1] + 0.3 - 1e-6  # step 12's holds
+
+
+def test_the_rows_of_one_step_give_way_evenly():
+    """Two contradictory rows of one step share its slack: each gives way by half the gap (the largest
+    violation is what costs), not one by the whole gap."""
+    case = flight_case(np.random.default_rng(3))
+    controller = ModelPredictiveController(MpcParams())
+    x = controller.solve(**case).positions_m[5, 0]
+    planes = HalfPlanes(
+        steps=np.array([5, 5]),
+        normals_xy=np.array([[1.0, 0.0], [-1.0, 0.0]]),
+        offsets=np.array([x + 0.1, -x + 0.1]),  # x(5) >= x + 0.1 and x(5) <= x - 0.1: 0.2 m of gap
+    )
+    sol = controller.solve(**case, half_planes=planes)
+    assert sol.ok and sol.half_plane_violation_m == pytest.approx(0.1, abs=1e-3)
+    assert sol.positions_m[5, 0] == pytest.approx(x, abs=1e-3)
 
 
 def test_half_plane_step_outside_the_horizon_raises():
