@@ -444,18 +444,25 @@ def test_separation_planes_on_every_step_match_osqp(soft, tilt):
     assert solved >= 15  # most can hold (the MAV starts inside its cell); the rest are compared as failures
 
 
-def test_hard_half_planes_that_cannot_hold_fail_the_solve():
-    """Hard rows have no slack: contradictory ones make the QP infeasible, reported as such (the caller
-    brakes or escapes); with one of them soft, that one gives way."""
+def squeezed_at_step_5(soft: np.ndarray | None = None):
+    """(case, controller, x, planes): a flight case, x(5) of its free plan, and two rows of step 5 with 0.2 m
+    of gap around it, x(5) >= x + 0.1 and x(5) <= x - 0.1 (each alone can hold)."""
     case = flight_case(np.random.default_rng(3))
     controller = ModelPredictiveController(MpcParams())
     x = controller.solve(**case).positions_m[5, 0]
     planes = HalfPlanes(
         steps=np.array([5, 5]),
         normals_xy=np.array([[1.0, 0.0], [-1.0, 0.0]]),
-        offsets=np.array([x + 0.1, -x + 0.1]),  # 0.2 m apart; each alone can hold
-        soft=np.array([True, False]),
+        offsets=np.array([x + 0.1, -x + 0.1]),
+        soft=soft,
     )
+    return case, controller, x, planes
+
+
+def test_hard_half_planes_that_cannot_hold_fail_the_solve():
+    """Hard rows have no slack: contradictory ones make the QP infeasible, reported as such (the caller
+    brakes or escapes); with one of them soft, that one gives way."""
+    case, controller, x, planes = squeezed_at_step_5(soft=np.array([True, False]))
     mixed = controller.solve(**case, half_planes=planes)
     assert mixed.ok and mixed.half_plane_violation_m == pytest.approx(0.2, abs=1e-3)
     assert mixed.positions_m[5, 0] == pytest.approx(x - 0.1, abs=1e-6)  # the hard row holds exactly
@@ -485,14 +492,7 @@ def test_a_step_whose_rows_cannot_hold_lets_no_other_steps_rows_give_way():
 def test_the_rows_of_one_step_give_way_evenly():
     """Two contradictory rows of one step share its slack: each gives way by half the gap (the largest
     violation is what costs), not one by the whole gap."""
-    case = flight_case(np.random.default_rng(3))
-    controller = ModelPredictiveController(MpcParams())
-    x = controller.solve(**case).positions_m[5, 0]
-    planes = HalfPlanes(
-        steps=np.array([5, 5]),
-        normals_xy=np.array([[1.0, 0.0], [-1.0, 0.0]]),
-        offsets=np.array([x + 0.1, -x + 0.1]),  # x(5) >= x + 0.1 and x(5) <= x - 0.1: 0.2 m of gap
-    )
+    case, controller, x, planes = squeezed_at_step_5()
     sol = controller.solve(**case, half_planes=planes)
     assert sol.ok and sol.half_plane_violation_m == pytest.approx(0.1, abs=1e-3)
     assert sol.positions_m[5, 0] == pytest.approx(x, abs=1e-3)
