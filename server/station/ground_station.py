@@ -217,18 +217,20 @@ class GroundStation:
 
     def tick(self) -> None:
         """Run one control tick of the whole team, one control period after the previous one."""
-        with self._lock:
-            self._ticker = threading.get_ident()
-            now = self._time + self._period if self._clock is None else max(self._clock(), self._time)
-            self._time = now
-            self._changed()
-            self._mission.step(now)
-            if now - self._alerts_read_s >= self._alert_period_s - 1e-9:
-                self._read_alerts(now)
-            if self._log is not None and self._log.sample_due(now):
-                self._log.record_sample(self.scene_view)
-        with self._tick_done:
-            self._tick_done.notify_all()
+        try:
+            with self._lock:
+                self._ticker = threading.get_ident()
+                now = self._time + self._period if self._clock is None else max(self._clock(), self._time)
+                self._time = now
+                self._changed()
+                self._mission.step(now)
+                if now - self._alerts_read_s >= self._alert_period_s - 1e-9:
+                    self._read_alerts(now)
+                if self._log is not None and self._log.sample_due(now):
+                    self._log.record_sample(self.scene_view)
+        finally:
+            with self._tick_done:  # a failed tick ends a stall too: its time is the view's
+                self._tick_done.notify_all()
 
     # ---- flight log ---------------------------------------------------------------------------------------
     def attach_log(self, flight_log: FlightLog) -> None:
