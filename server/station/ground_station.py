@@ -227,7 +227,7 @@ class GroundStation:
                 if now - self._alerts_read_s >= self._alert_period_s - 1e-9:
                     self._read_alerts(now)
                 if self._log is not None and self._log.sample_due(now):
-                    self._log.record_sample(self.scene_view)
+                    self._log.record_sample(self._cached_view)
         finally:
             with self._tick_done:  # a failed tick ends a stall too: its time is the view's
                 self._tick_done.notify_all()
@@ -248,7 +248,7 @@ class GroundStation:
 
     # ---- alerts and pace ----------------------------------------------------------------------------------
     def _read_alerts(self, now: float) -> None:
-        view = self.scene_view()
+        view = self._cached_view()  # the tick's own reading: no stall to wait out
         utc = self._wall_clock() if self._wall_clock is not None else None
         self._alerts.update(now, conditions(view, self._alert_params), utc_s=utc)
         self._alerts_read_s = now
@@ -338,7 +338,7 @@ class GroundStation:
                     self._tick_done.wait(timeout=STALL_WAIT_S)
         with self._lock:
             stalled_s = self._stalled_s()
-            view = self._fresh_view()
+            view = self._cached_view()
             return view if stalled_s is None else _stalled_view(view, stalled_s)
 
     def _stalled_s(self) -> float | None:
@@ -349,7 +349,8 @@ class GroundStation:
         stalled_s = self._clock() - self._time
         return stalled_s if stalled_s > STALL_AFTER_S else None
 
-    def _fresh_view(self) -> SceneView:
+    def _cached_view(self) -> SceneView:
+        """The view as of the last tick or command, built at its first reading."""
         with self._lock:
             if self._view is None:
                 self._view = scene_view(

@@ -8,22 +8,13 @@ import threading
 import time
 
 import pytest
+from test_live import FakeClock
 
 from server.station.ground_station import STALL_AFTER_S, STALL_WAIT_S, GroundStation
 from vehicles.mission import Phase
 from vehicles.sim.scenario import Scenario, build_sim
 
 RATE_HZ = 20.0
-
-
-class FakeClock:
-    """The station's monotonic clock, moved by the test."""
-
-    def __init__(self) -> None:
-        self.now_s = 0.0
-
-    def __call__(self) -> float:
-        return self.now_s
 
 
 @pytest.fixture
@@ -34,8 +25,8 @@ def flying() -> tuple[GroundStation, FakeClock]:
     station = GroundStation(mission=setup.mission, control_period_s=1.0 / RATE_HZ, clock=clock)
     station.set_formation_enabled(True)
     while not all(v.phase == Phase.FORMATION for v in station.snapshot().vehicles):
-        assert clock.now_s < 60.0, "the team did not form up"
-        clock.now_s += 1.0 / RATE_HZ
+        assert clock.now < 60.0, "the team did not form up"
+        clock.now += 1.0 / RATE_HZ
         station.tick()
     return station, clock
 
@@ -56,19 +47,19 @@ def view_from_another_thread(station: GroundStation):
 def test_a_view_read_after_a_stall_is_the_first_ticks_after_it(flying):
     station, clock = flying
     assert all(v.in_formation for v in station.scene_view().vehicles)
-    clock.now_s += 3.0  # the loop stood for 3 s
+    clock.now += 3.0  # the loop stood for 3 s
     reader, box = view_from_another_thread(station)
     time.sleep(0.2)
     assert reader.is_alive()  # it waits for the tick rather than answer with the team before the stall
     station.tick()
     reader.join(timeout=5.0)
-    assert box["view"].time_s == pytest.approx(clock.now_s, abs=1e-9)
+    assert box["view"].time_s == pytest.approx(clock.now, abs=1e-9)
     assert box["waited_s"] < STALL_WAIT_S
 
 
 def test_a_view_read_while_the_loop_still_stands_shows_no_vehicle_in_formation(flying):
     station, clock = flying
-    clock.now_s += 3.0
+    clock.now += 3.0
     reader, box = view_from_another_thread(station)
     reader.join(timeout=5.0)
     assert box["waited_s"] == pytest.approx(STALL_WAIT_S, abs=0.5)
@@ -78,7 +69,7 @@ def test_a_view_read_while_the_loop_still_stands_shows_no_vehicle_in_formation(f
 
 def test_a_short_pause_below_the_stall_limit_is_answered_at_once_as_it_is(flying):
     station, clock = flying
-    clock.now_s += 0.5 * STALL_AFTER_S
+    clock.now += 0.5 * STALL_AFTER_S
     reader, box = view_from_another_thread(station)
     reader.join(timeout=5.0)
     assert box["waited_s"] < 0.2
@@ -87,7 +78,7 @@ def test_a_short_pause_below_the_stall_limit_is_answered_at_once_as_it_is(flying
 
 def test_the_ticking_thread_itself_never_waits_for_its_own_tick(flying):
     station, clock = flying
-    clock.now_s += 3.0
+    clock.now += 3.0
     started = time.monotonic()
     view = station.scene_view()
     assert time.monotonic() - started < 0.2
