@@ -13,7 +13,7 @@ they enter the dynamics as accelerations. Everything here is a pure function of 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -131,6 +131,8 @@ class TeammatePaths:
     d_max_m: (J,) the teammate-repulsion d_max of eq. 15 for each (covariance radii and message age included).
     rejected: plans dropped for non-finite or absurd numbers while building this.
     ages_s: (J,) each plan's age at now (s); None: all fresh (0).
+    gps_offsets_m: (J, 3) each sender's GPS offset relative to the team (HorizonPlan.gps_offset_m);
+    None: zeros.
     """
 
     positions_m: np.ndarray
@@ -139,6 +141,16 @@ class TeammatePaths:
     d_max_m: np.ndarray
     rejected: int = 0
     ages_s: np.ndarray | None = None
+    gps_offsets_m: np.ndarray | None = None
+
+    def placed_by(self, own_offset_m: np.ndarray) -> TeammatePaths:
+        """These paths shifted by own_offset_m (3,) less each sender's offset: where the teammates are
+        relative to us, both GPS offsets taken out (controller/gps_offset.py)."""
+        offsets = np.zeros((self.count, 3)) if self.gps_offsets_m is None else self.gps_offsets_m
+        shift = np.asarray(own_offset_m, dtype=float)[None, :] - offsets
+        if not np.any(shift):
+            return self
+        return replace(self, positions_m=self.positions_m + shift[:, None, :])
 
     @property
     def ages(self) -> np.ndarray:
@@ -362,7 +374,8 @@ def teammate_paths(
     )
     ids = np.array([p.vehicle_id for p in plans], dtype=int)
     in_formation = np.array([p.in_formation for p in plans], dtype=bool)
-    return TeammatePaths(paths, ids, in_formation, d_max, rejected, np.maximum(now_s - stamps, 0.0))
+    offsets = np.stack([p.gps_offset_m for p in plans])
+    return TeammatePaths(paths, ids, in_formation, d_max, rejected, np.maximum(now_s - stamps, 0.0), offsets)
 
 
 # --------------------------------------------------------------------------------------------- the terms

@@ -459,7 +459,7 @@ class FormationController:
         return separation_rows(
             own_path_m=own_path,
             own_velocities_mps=own_vel,
-            mates=mates,
+            mates=mates.placed_by(own.gps_offset_m),
             mate_ages_s=ages,
             inflation_m=radii + age_margin_m(ages, speed_term_m=speed_term, params=prm.separation),
             obstacles=obstacle_set,

@@ -51,6 +51,8 @@ class VehicleState:
 
     position_m: (3,) ENU position; velocity_mps: (3,); yaw_rad: heading of the body (camera) axis;
     position_cov_m2: (3, 3) self-localisation covariance (GPS drift is not in it: it is unknown to the MAV).
+    gps_offset_m: (3,) the MAV's estimate of its GPS offset relative to its team (controller/gps_offset.py;
+    zeros: none), which places the teammates for the separation rows.
     """
 
     vehicle_id: int
@@ -59,11 +61,13 @@ class VehicleState:
     velocity_mps: np.ndarray
     yaw_rad: float = 0.0
     position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
+    gps_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))
         _freeze(self, "velocity_mps", (3,))
         _freeze(self, "position_cov_m2", (3, 3))
+        _freeze(self, "gps_offset_m", (3,))
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,6 +123,8 @@ class HorizonPlan:
     x(n) is predicted n * dt_s later; velocities_mps: (N+2, 3) likewise. in_formation is False for a MAV that
     left formation control (landing, landed, link lost): teammates then avoid it but do not space around it.
     position_cov_m2: (3, 3) the sender's self-localisation covariance (for the guarantee's d_max).
+    gps_offset_m: (3,) the sender's estimate of its GPS offset relative to its team
+    (controller/gps_offset.py; zeros: none): where it is among its teammates is positions_m less this.
     """
 
     vehicle_id: int
@@ -128,11 +134,13 @@ class HorizonPlan:
     velocities_mps: np.ndarray
     in_formation: bool = True
     position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
+    gps_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         _freeze(self, "positions_m", (-1, 3))
         _freeze(self, "velocities_mps", (-1, 3))
         _freeze(self, "position_cov_m2", (3, 3))
+        _freeze(self, "gps_offset_m", (3,))
         if self.positions_m.shape != self.velocities_mps.shape or len(self.positions_m) < 1:
             raise ValueError("positions_m and velocities_mps must both be (N+2, 3)")
 

@@ -118,6 +118,7 @@ class TeammateTable:
         self._radii = np.zeros(capacity)
         self._in_formation = np.zeros(capacity, dtype=np.bool_)
         self._row_ids = np.zeros(capacity, dtype=np.int64)
+        self._offsets = np.zeros((capacity, 3))  # the sender's GPS offset relative to the team
 
     def _grow(self, capacity: int, length: int) -> None:
         """Re-allocate every column for `capacity` rows of `length` states, keeping the stored rows."""
@@ -125,6 +126,9 @@ class TeammateTable:
         positions = np.zeros((capacity, length, 3))
         positions[:old, : self._positions.shape[1]] = self._positions[:old]
         self._positions = positions
+        offsets = np.zeros((capacity, 3))
+        offsets[:old] = self._offsets[:old]
+        self._offsets = offsets
         for name in self._COLUMNS[1:]:
             column = getattr(self, name)
             fill = np.ones if name == "_dts" else np.zeros
@@ -173,7 +177,7 @@ class TeammateTable:
         if old is None:
             if self._count == self._positions.shape[0]:
                 self._grow(2 * self._count, self._positions.shape[1])
-            for name in self._COLUMNS:
+            for name in (*self._COLUMNS, "_offsets"):
                 arr = getattr(self, name)
                 arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
             self._count += 1
@@ -189,6 +193,7 @@ class TeammateTable:
         self._stamps[row] = plan.stamp_s
         self._dts[row] = plan.dt_s
         self._in_formation[row] = plan.in_formation
+        self._offsets[row] = plan.gps_offset_m
         return "stored"
 
     def fresh_count(self, since_s: float, *, in_formation: bool = True) -> int:
@@ -236,7 +241,8 @@ class TeammateTable:
             + teammate_age_term_m(now_s - self._stamps[rows], params)
         )
         ages = np.maximum(now_s - self._stamps[rows], 0.0)
-        mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max, 0, ages)
+        offsets = self._offsets[rows]
+        mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max, 0, ages, offsets)
         if not extra:
             return mates
         more = teammate_paths(
@@ -248,6 +254,7 @@ class TeammateTable:
             params=params,
             current_position_only=current_position_only,
         )
+        more_offsets = more.gps_offsets_m if more.gps_offsets_m is not None else np.zeros((0, 3))
         return TeammatePaths(
             np.concatenate([out, more.positions_m]),
             np.concatenate([mates.vehicle_ids, more.vehicle_ids]),
@@ -255,4 +262,5 @@ class TeammateTable:
             np.concatenate([d_max, more.d_max_m]),
             more.rejected,
             np.concatenate([ages, more.ages]),
+            np.concatenate([offsets, more_offsets]),
         )

@@ -15,7 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from controller.gps_offset import GpsOffsetParams
 from controller.params import MAX_TEAM_SIZE, FormationParams, Method, ParameterError
+from vehicles.agent import AgentParams
 from vehicles.sim.scenario import Scenario
 
 RATE_RANGE_HZ = (1.0, 1000.0)
@@ -47,7 +49,9 @@ class RunSettings:
     random or still; comm_loss in [0, 1]; start: ring or cluster; d_des_m, h_des_m: the operator's formation;
     latency_s: link latency; gps_drift; virtual_obstacles: none or paper (the paper's SE4); rate_hz: control
     rate (the paper: 100 Hz); replan_hz: 0 solves every MPC every tick (the paper), a positive rate <= rate_hz
-    at most that often, following the latest plan in between (vehicles/agent.py).
+    at most that often, following the latest plan in between (vehicles/agent.py); gps_offset: each MAV
+    estimates its GPS offset relative to the team and places its teammates by it (controller/gps_offset.py;
+    False: it takes their plans as their GPS puts them, as the paper's MAVs did).
     """
 
     vehicles: int = 3
@@ -64,6 +68,7 @@ class RunSettings:
     virtual_obstacles: str = "none"
     rate_hz: float = 100.0
     replan_hz: float = 0.0
+    gps_offset: bool = True
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -85,6 +90,13 @@ class RunSettings:
     def replan_period_s(self) -> float:
         """Seconds between MPC solves when replan_hz > 0, else 0 (every tick)."""
         return 1.0 / self.replan_hz if self.replan_hz > 0 else 0.0
+
+    @property
+    def agent_params(self) -> AgentParams:
+        """What every simulated MAV's agent runs with: the re-planning period and the GPS offset estimate."""
+        return AgentParams(
+            replan_period_s=self.replan_period_s, gps_offset=GpsOffsetParams() if self.gps_offset else None
+        )
 
     def scenario(self) -> Scenario:
         """The world and team these settings fly."""

@@ -28,13 +28,14 @@ so that its camera sweeps the surroundings and finds the person again, instead o
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
 
 from controller.angles import wrap_angle
 from controller.formation import FormationController
+from controller.gps_offset import GpsOffsetEstimator, GpsOffsetParams
 from controller.messages import (
     ControlOutput,
     Detection,
@@ -74,7 +75,9 @@ class AgentParams:
     moment, with 25 % link loss a chance of 1e-9 per teammate, with 90 % loss 0.21 (docs/safety.md);
     resume_within_s: the hold ends (and formation flight first begins) once every roster teammate has been
     heard within this long: the age up to which the separation rows trust a teammate to hold its own
-    (SeparationParams.cooperative_age_s)."""
+    (SeparationParams.cooperative_age_s); gps_offset: estimate this MAV's GPS offset relative to the team
+    from its detections, publish it with the plans, and place the teammates by it in the separation rows
+    (controller/gps_offset.py; None: take the teammates' plans as their GPS puts them)."""
 
     plan_period_s: float = 0.1
     teammate_timeout_s: float = 3.0
@@ -82,6 +85,7 @@ class AgentParams:
     replan_period_s: float = 0.0
     blind_after_s: float = 1.5
     resume_within_s: float = 0.5
+    gps_offset: GpsOffsetParams | None = field(default_factory=GpsOffsetParams)
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,7 +135,9 @@ class AgentCounters:
 class AgentOutputs:
     """One tick's results: setpoint for the autopilot (None unless role is FORMATION); control: the
     controller's output; plan: the plan this MAV currently stands by (published or not); person: the fused
-    estimate now; outbox: messages to broadcast; fault: one line when something went wrong this tick."""
+    estimate now; outbox: messages to broadcast; fault: one line when something went wrong this tick;
+    gps_offset_m (3,): the estimate of this MAV's GPS offset relative to its team (zeros when not
+    estimated): its reported position less this is where it is among its teammates."""
 
     stamp_s: float
     setpoint: Setpoint | None
@@ -145,6 +151,7 @@ class AgentOutputs:
     used_slot: bool = False
     fault: str | None = None
     camera: ConverterStats | None = None
+    gps_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True, eq=False)
@@ -205,6 +212,8 @@ class Agent:
         self._last_person: PersonEstimate | None = None
         self._holding = True  # a MAV starts formation flight only once it has heard every teammate afresh
         self._counts = dict.fromkeys(AgentCounters.__dataclass_fields__, 0)
+        self._offset = GpsOffsetEstimator(self._ap.gps_offset) if self._ap.gps_offset is not None else None
+        self._teammate_detection_s = -math.inf  # capture time of the latest teammate detection fused
 
     @property
     def params(self) -> ControllerParams:
@@ -233,19 +242,24 @@ class Agent:
             step = self._replan(now_s, own, person, since, known, inputs)
         elif own is not None and inputs.role == AgentRole.AIRBORNE:
             step = _Step(plan=hold_plan(state=own, params=self._params, in_formation=False))
+        offset = self._offset.offset_m if self._offset is not None else np.zeros(3)
+        plan = step.plan
+        if plan is not None and np.any(offset):
+            plan = replace(plan, gps_offset_m=offset)
         return AgentOutputs(
             stamp_s=now_s,
             setpoint=step.setpoint,
             control=step.control,
-            plan=step.plan,
+            plan=plan,
             person=person,
-            outbox=self._outbox(now_s, detections, step.plan),
+            outbox=self._outbox(now_s, detections, plan),
             tracker=self._tracker.stats(),
             counters=AgentCounters(**self._counts),
             teammates_known=known,
             used_slot=step.used_slot,
             fault=step.fault,
             camera=self._converter.stats() if self._converter is not None else None,
+            gps_offset_m=offset,
         )
 
     def _take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
@@ -278,9 +292,25 @@ class Agent:
         for det, ours in sorted(fuse, key=lambda item: _capture_order(item[0])):
             if not ours:
                 self._receive(det)  # a teammate's (or refused: one claiming our id)
-            elif self._tracker.update(det) in (Verdict.ACCEPTED, Verdict.RESET):
+                continue
+            self._learn_offset(det)
+            if self._tracker.update(det) in (Verdict.ACCEPTED, Verdict.RESET):
                 counts["own_detections_fused"] += 1
         return detections
+
+    def _learn_offset(self, det: Detection) -> None:
+        """Compare an own detection with the fused estimate at its stamp, before it is fused: the residual
+        measures this MAV's GPS offset relative to the team, while that estimate holds a teammate's
+        detection."""
+        est = self._offset
+        if est is None or not det.stamp_s - self._teammate_detection_s <= est.params.teammate_within_s:
+            return
+        person = self._tracker.estimate(det.stamp_s)
+        if person is None or abs(person.stamp_s - det.stamp_s) > est.params.max_age_s:
+            return
+        est.update(
+            det.position_m - person.position_m, det.cov_m2 + person.position_cov_m2, float(det.stamp_s)
+        )
 
     def _replan(
         self,
@@ -316,6 +346,7 @@ class Agent:
                     velocity_mps=own.velocity_mps,
                     yaw_rad=own.yaw_rad,
                     position_cov_m2=own.position_cov_m2,
+                    gps_offset_m=self._offset.offset_m if self._offset is not None else np.zeros(3),
                 ),
                 person=person,
                 teammates=self._teammates.view(since_s, phantoms),
@@ -411,6 +442,7 @@ class Agent:
         velocity = np.array([person.velocity_mps[0], person.velocity_mps[1], 0.0])
         drift = np.arange(n)[:, None] * dt * velocity[None, :]
         d, h = inputs.formation.d_des_m, inputs.formation.h_des_m
+        own_offset = self._offset.offset_m if self._offset is not None else np.zeros(3)
         out = []
         for vid, bearing in inputs.roster:
             if vid == self.vehicle_id or vid in heard_ids:
@@ -424,6 +456,7 @@ class Agent:
                     positions_m=slot[None, :] + drift,
                     velocities_mps=np.repeat(velocity[None, :], n, axis=0),
                     in_formation=True,
+                    gps_offset_m=own_offset,  # placed in our own frame
                 )
             )
         return tuple(out)
@@ -463,8 +496,13 @@ class Agent:
         if isinstance(msg, Detection) and msg.source_id != self.vehicle_id:
             if self._tracker.update(msg) in (Verdict.ACCEPTED, Verdict.RESET):
                 counts["teammate_detections_fused"] += 1
+                self._teammate_detection_s = max(self._teammate_detection_s, float(msg.stamp_s))
         elif isinstance(msg, HorizonPlan) and msg.vehicle_id != self.vehicle_id:
             if not (np.all(np.isfinite(msg.positions_m)) and np.isfinite(msg.stamp_s) and msg.dt_s > 0):
+                counts["rejected_messages"] += 1
+                return
+            limit = self._offset.params.max_offset_m if self._offset is not None else math.inf
+            if not float(np.abs(msg.gps_offset_m).max()) <= limit:  # NaN included
                 counts["rejected_messages"] += 1
                 return
             if self._teammates.update(msg) == "refused":  # e.g. an absurd covariance

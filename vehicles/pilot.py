@@ -28,8 +28,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
+
+import numpy as np
 
 from controller.messages import HorizonPlan, PersonEstimate, SolveStatus
 from controller.params import ControllerParams, FormationParams
@@ -85,7 +87,8 @@ class VehicleSnapshot:
     because teammates are unheard; fault: last fault line; agent: how the ground station hears this
     vehicle's agent over the network (None when the agent runs in the station's own process); in_formation: in
     the formation roster and flown by formation control now (False while its autopilot runs a failsafe, a
-    pilot has it, its link is lost, or it is not airborne).
+    pilot has it, its link is lost, or it is not airborne); gps_offset_m (3,): the agent's estimate of its
+    GPS offset (AgentOutputs.gps_offset_m; zeros when unknown).
     """
 
     vehicle_id: int
@@ -105,6 +108,15 @@ class VehicleSnapshot:
     counters: AgentCounters
     agent: AgentLink | None = None
     in_formation: bool = False
+    gps_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def believed_position_m(self) -> np.ndarray | None:
+        """(3,) where this MAV's controller believes it is, in the team's frame: the reported position less
+        the estimated GPS offset (None before the first telemetry)."""
+        if self.autopilot is None:
+            return None
+        return self.autopilot.position_m - self.gps_offset_m
 
 
 @dataclass(frozen=True)
@@ -388,6 +400,7 @@ class VehiclePilot:
             tracker=out.tracker if out is not None else TrackerStats(),
             counters=out.counters if out is not None else AgentCounters(),
             in_formation=self.in_roster and self.role(enabled=self._enabled) == AgentRole.FORMATION,
+            gps_offset_m=out.gps_offset_m if out is not None else np.zeros(3),
         )
 
 

@@ -82,6 +82,10 @@ START = typer.Option(case_sensitive=False, help="MAVs start at their roster slot
 D_DES = positive("desired horizontal distance to the person", "M")
 H_DES = positive("desired height above the person", "M")
 REPORT = typer.Option(metavar="PATH", help="write the JSON report here", dir_okay=False)
+GPS_OFFSET = typer.Option(
+    "--gps-offset/--no-gps-offset",
+    help="each MAV learns its GPS offset relative to the team from its detections and places teammates by it",
+)
 
 
 def sim(
@@ -99,6 +103,7 @@ def sim(
     start: Annotated[StartLayout, START] = StartLayout.ring,
     d_des: Annotated[float, D_DES] = 8.0,
     h_des: Annotated[float, H_DES] = 8.0,
+    gps_offset: Annotated[bool, GPS_OFFSET] = True,
     report: Annotated[Path | None, REPORT] = None,
 ) -> None:
     """Run the embedded simulation of the paper's world and report its metrics."""
@@ -127,6 +132,7 @@ def sim(
             start=start.value,
             d_des_m=d_des,
             h_des_m=h_des,
+            gps_offset=gps_offset,
         )
     except ParameterError as exc:
         raise typer.BadParameter(exc.reason, param_hint=OPTION_OF_FIELD.get(exc.field, exc.field)) from None

@@ -25,8 +25,8 @@ Names are a public interface (the JSON report, the experiments' tables): keep th
   min_obstacle_clearance_m (horizontal distance of an airborne MAV to a trunk's surface, below its top;
   negative inside it: contact), min_person_distance_m (horizontal, airborne MAVs);
 - min_believed_separation_m: min_separation_m between the positions the MAVs believe they are at (their
-  self-localisation, GPS drift included), which is what the controllers keep apart; the gap to
-  min_separation_m is what the drift costs;
+  self-localisation less their estimated GPS offsets), which is what the controllers keep apart; the gap
+  to min_separation_m is what the drift and its estimate's error cost;
 - where and when each safety minimum happened, to reproduce it: min_separation_t_s and min_separation_pair
   [vehicle id, vehicle id], the same for min_believed_separation_, min_obstacle_clearance_t_s and
   min_obstacle_clearance_pair [vehicle id, obstacle id], min_person_distance_t_s and

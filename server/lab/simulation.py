@@ -19,7 +19,6 @@ import numpy as np
 from controller.params import ParameterError
 from server.lab.metrics import WARMUP_EPS_S, Recorder, TickSample
 from server.settings import RunSettings, real_number
-from vehicles.agent import AgentParams
 from vehicles.mission import MissionSnapshot, Phase, VehicleSnapshot
 from vehicles.sim.autopilot import SimAutopilot
 from vehicles.sim.scenario import SimSetup, build_sim
@@ -97,10 +96,10 @@ def _sample(setup: SimSetup, snap: MissionSnapshot, t: float) -> TickSample:
 
 
 def _believed(vehicle: VehicleSnapshot, autopilot: SimAutopilot) -> np.ndarray:
-    """(3,) where the MAV thinks it is: its autopilot's self-localised position (the truth before the first
-    telemetry)."""
-    state = vehicle.autopilot
-    return np.asarray(state.position_m if state is not None else autopilot.true_position_m, dtype=float)
+    """(3,) where the MAV thinks it is: its autopilot's self-localised position less its estimated GPS offset
+    (the truth before the first telemetry)."""
+    believed = vehicle.believed_position_m
+    return np.asarray(believed if believed is not None else autopilot.true_position_m, dtype=float)
 
 
 def run_simulation(config: SimConfig, *, progress: Callable[[float], None] | None = None) -> SimReport:
@@ -109,7 +108,7 @@ def run_simulation(config: SimConfig, *, progress: Callable[[float], None] | Non
     setup = build_sim(
         config.scenario(),
         clock=time.perf_counter,
-        agent_params=AgentParams(replan_period_s=config.replan_period_s),
+        agent_params=config.agent_params,
     )
     mission, world = setup.mission, setup.world
     ids = mission.vehicle_ids

@@ -450,6 +450,7 @@ class AgentFleet:
                 agent=link,
             )
         autopilot = plan = person = setpoint = None
+        gps_offset = np.zeros(3)
         try:
             if s.autopilot is not None:
                 autopilot = wire.telemetry_from_wire(s.autopilot, vehicle_id=vid)
@@ -466,6 +467,11 @@ class AgentFleet:
                     velocity_mps=np.zeros(3),
                     yaw_rad=s.setpoint_yaw_rad,
                 )
+            if s.gps_offset_m is not None:
+                gps_offset = np.array(s.gps_offset_m, dtype=float)
+                if not np.all(np.isfinite(gps_offset)):
+                    gps_offset = np.zeros(3)
+                    raise ValueError("the GPS offset is not finite")
         except (ValueError, TypeError):
             self.bad_reports += 1  # an agent reported values its own types refuse: shown as unknown
         agent_now = utc + (offset or 0.0)
@@ -489,6 +495,7 @@ class AgentFleet:
             # flies the formation: its phase, and the plan it shares says so (a released or grounded agent's
             # plan does not), and it is heard
             in_formation=_phase(s) == Phase.FORMATION and plan is not None and plan.in_formation and not lost,
+            gps_offset_m=gps_offset,
         )
 
     def _counters(self, vehicles: Sequence[VehicleSnapshot]) -> MissionCounters:

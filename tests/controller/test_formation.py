@@ -195,6 +195,26 @@ def test_out_of_formation_teammate_is_still_avoided():
     assert out.external_inputs[0, 1] < -0.1
 
 
+def _gap_to_a_teammate_4_m_north_as_reported(ours, theirs) -> np.ndarray:
+    """(N+2,) distances of our plan from a holding teammate reported 4 m north, placed by both GPS offsets."""
+    own = replace(state(on_circle(0.0)), gps_offset_m=np.array(ours, dtype=float))
+    reported = on_circle(0.0) + np.array([0.0, 4.0, 0.0])
+    mate = replace(hold_plan(reported, in_formation=False), gps_offset_m=np.array(theirs, dtype=float))
+    out = step(controller(), own, teammates=[mate])
+    return np.linalg.norm(out.plan.positions_m - (reported + np.array(ours) - np.array(theirs)), axis=1)
+
+
+def test_the_separation_rows_place_a_teammate_by_both_gps_offsets():
+    # our GPS reads 0.8 m south of where we are among the team, the teammate's 0.8 m north: it is 2.4 m away
+    gaps = _gap_to_a_teammate_4_m_north_as_reported((0.0, -0.8, 0.0), (0.0, 0.8, 0.0))
+    assert gaps[0] == pytest.approx(2.4, abs=1e-9)
+    assert gaps[-1] > 2.9  # the plan opens the whole gap (2.6 m) to where the teammate is
+
+
+def test_without_gps_offsets_the_same_teammate_4_m_away_moves_nothing():
+    np.testing.assert_allclose(_gap_to_a_teammate_4_m_north_as_reported((0, 0, 0), (0, 0, 0)), 4.0, atol=1e-6)
+
+
 # ------------------------------------------------------------------------------------------- methods
 @pytest.mark.parametrize("method", list(Method))
 def test_each_method_solves_with_teammates_and_trees(method):

@@ -24,6 +24,7 @@ def plan(rng: np.random.Generator, vid: int, stamp: float, *, length: int = 17) 
         velocities_mps=rng.normal(size=(length, 3)),
         in_formation=bool(rng.integers(2)),
         position_cov_m2=a @ a.T * 0.1,
+        gps_offset_m=rng.normal(0.0, 0.5, 3),
     )
 
 
@@ -64,6 +65,7 @@ def test_paths_equal_teammate_paths_of_the_fresh_plans(seed, price):
     np.testing.assert_array_equal(got.vehicle_ids, expected.vehicle_ids)
     np.testing.assert_array_equal(got.in_formation, expected.in_formation)
     np.testing.assert_allclose(got.d_max_m, expected.d_max_m, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got.gps_offsets_m, expected.gps_offsets_m)
     assert table.plans() == tuple(latest[v] for v in sorted(latest))
 
 
@@ -76,7 +78,43 @@ def test_extra_plans_come_after_the_stored_ones():
         now_s=1.0, dt_s=0.1, steps=STEPS, own_cov_radius_m=0.0, params=PARAMS
     )
     np.testing.assert_array_equal(got.vehicle_ids, [5, 2])
+    np.testing.assert_array_equal(got.gps_offsets_m, [stored.gps_offset_m, extra.gps_offset_m])
     assert tuple(table.view(0.0, (extra,))) == (stored, extra)
+
+
+def test_placed_by_our_offset_each_path_moves_by_ours_less_its_senders():
+    rng = np.random.default_rng(3)
+    table = TeammateTable(own_id=0, plan_length=17)
+    for vid in (4, 7):
+        table.update(plan(rng, vid, 1.0))
+    got = table.paths(since_s=0.0, now_s=1.0, dt_s=0.1, steps=STEPS, own_cov_radius_m=0.0, params=PARAMS)
+    ours = np.array([0.3, -0.2, 0.1])
+    placed = got.placed_by(ours)
+    for j, vid in enumerate((4, 7)):
+        shift = ours - table.plans()[j].gps_offset_m
+        np.testing.assert_allclose(placed.positions_m[j] - got.positions_m[j], np.tile(shift, (STEPS, 1)))
+        assert placed.vehicle_ids[j] == vid
+    np.testing.assert_array_equal(placed.d_max_m, got.d_max_m)
+
+
+def test_placed_by_an_offset_equal_to_every_senders_the_paths_stay():
+    rng = np.random.default_rng(4)
+    table = TeammateTable(own_id=0, plan_length=17)
+    same = np.array([0.5, 0.5, 0.0])
+    for vid in (2, 3):
+        p = plan(rng, vid, 1.0)
+        table.update(
+            HorizonPlan(
+                vehicle_id=vid,
+                stamp_s=1.0,
+                dt_s=p.dt_s,
+                positions_m=p.positions_m,
+                velocities_mps=p.velocities_mps,
+                gps_offset_m=same,
+            )
+        )
+    got = table.paths(since_s=0.0, now_s=1.0, dt_s=0.1, steps=STEPS, own_cov_radius_m=0.0, params=PARAMS)
+    assert got.placed_by(same) is got
 
 
 def test_own_absurd_and_older_plans_are_not_stored():

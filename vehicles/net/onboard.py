@@ -412,6 +412,7 @@ class OnboardAgent:
             station_lost=self.station_lost,
             scheduler=self.scheduler,
             camera=_camera_counts(self.converter.stats()),
+            gps_offset_m=wire._vec(snap.gps_offset_m),
         )
 
 

@@ -84,6 +84,7 @@ class PlanBody(_Body, frozen=True):
     in_formation: bool
     position_cov_m2: Mat3
     phase: Annotated[str, msgspec.Meta(max_length=16)] = ""
+    gps_offset_m: Vec3 = (0.0, 0.0, 0.0)
 
 
 class DetectionBody(_Body, frozen=True):
@@ -166,7 +167,8 @@ class StateBody(_Body, frozen=True):
     when it arrived (agent UTC), for the station's clock-offset measurement; station_lost: no heartbeat for
     longer than the station timeout; camera: the camera converter's counts (received, converted, pending,
     rejected_<reason>, latency_p50_ms and latency_max_ms from capture to conversion, -1 before the first);
-    scheduler: what its control loop runs under (vehicles.net.realtime.describe), a refusal included.
+    scheduler: what its control loop runs under (vehicles.net.realtime.describe), a refusal included;
+    gps_offset_m: the agent's estimate of its GPS offset (AgentOutputs.gps_offset_m; None: not estimated).
     """
 
     phase: Annotated[str, msgspec.Meta(max_length=16)]
@@ -192,6 +194,7 @@ class StateBody(_Body, frozen=True):
     hb_received: float | None = None
     station_lost: bool = False
     scheduler: Text = ""
+    gps_offset_m: Vec3 | None = None
 
 
 class HeartbeatBody(_Body, frozen=True):
@@ -318,6 +321,7 @@ def plan_to_wire(plan: HorizonPlan, *, phase: str = "") -> PlanBody:
         in_formation=bool(plan.in_formation),
         position_cov_m2=_mat(plan.position_cov_m2),
         phase=phase,
+        gps_offset_m=_vec(plan.gps_offset_m),
     )
 
 
@@ -331,12 +335,14 @@ def plan_from_wire(body: PlanBody, *, vehicle_id: int) -> HorizonPlan:
         velocities_mps=np.array(body.velocities_mps),
         in_formation=body.in_formation,
         position_cov_m2=np.array(body.position_cov_m2).reshape(3, 3),
+        gps_offset_m=np.array(body.gps_offset_m),
     )
     _finite(plan.stamp_s, plan.dt_s)
     if plan.dt_s <= 0 or not (
         np.all(np.isfinite(plan.positions_m))
         and np.all(np.isfinite(plan.velocities_mps))
         and np.all(np.isfinite(plan.position_cov_m2))
+        and np.all(np.isfinite(plan.gps_offset_m))
     ):
         raise ValueError("a plan needs dt_s > 0 and finite states")
     return plan

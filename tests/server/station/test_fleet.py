@@ -19,8 +19,9 @@ from server.station.fleet import AgentFleet, FleetParams  # noqa: E402
 from server.station.ground_station import GroundStation, agent_view  # noqa: E402
 from vehicles.mission import MissionError, Phase  # noqa: E402
 from vehicles.net import wire  # noqa: E402
+from vehicles.net.keys import agent_key  # noqa: E402
 from vehicles.net.onboard import OnboardAgent, OnboardParams  # noqa: E402
-from vehicles.net.ports import free_port
+from vehicles.net.ports import free_port  # noqa: E402
 from vehicles.net.session import Bus, NetConfig  # noqa: E402
 from webui.cards import AGENT_LOST_FLAG, SKEW_FLAG, vehicle_detail_markdown  # noqa: E402
 
@@ -36,8 +37,8 @@ def wait_for(condition, timeout_s: float = 10.0) -> float:
     return time.monotonic() - t0
 
 
-@pytest.fixture
-def setup():
+def _buses(agent: int, agent_clock=time.time) -> tuple[Bus, Bus]:
+    """The station's bus (sender 0, listening on a free port of 127.0.0.1) and agent `agent`'s, connected."""
     port = free_port()
     member = lambda s: 0 <= s <= 2  # noqa: E731
     station_bus = Bus(
@@ -45,13 +46,19 @@ def setup():
         sender=0,
         is_member=member,
     )
-    skewed = lambda: time.time() + SKEW_S  # noqa: E731 - the agent's clock runs 200 ms ahead
     agent_bus = Bus(
         NetConfig(team=TEAM, connect=(f"tcp/127.0.0.1:{port}",), multicast_scouting=False),
-        sender=1,
+        sender=agent,
         is_member=member,
-        clock=skewed,
+        clock=agent_clock,
     )
+    return station_bus, agent_bus
+
+
+@pytest.fixture
+def setup():
+    skewed = lambda: time.time() + SKEW_S  # noqa: E731 - the agent's clock runs 200 ms ahead
+    station_bus, agent_bus = _buses(1, skewed)
     fleet = AgentFleet(
         bus=station_bus,
         vehicle_ids=[1, 2],  # vehicle 2's agent never runs
@@ -174,3 +181,50 @@ def _vehicle_view(vehicle):
     from server.station.ground_station import vehicle_view
 
     return vehicle_view(vehicle, link_stale_s=1.0)
+
+
+@pytest.fixture
+def reporter():
+    """A station fleet and a bare bus publishing as vehicle 2's agent, for hand-made state reports."""
+    station_bus, agent_bus = _buses(2)
+    fleet = AgentFleet(bus=station_bus, vehicle_ids=[2])
+    yield fleet, lambda body: agent_bus.publish(agent_key(TEAM, 2, "state"), body)
+    fleet.close(settle_s=0.0)
+    agent_bus.close()
+    station_bus.close()
+
+
+def _report(offset):
+    telemetry = wire.TelemetryBody(
+        stamp_s=time.time(),
+        position_m=(5.0, 1.0, 8.0),
+        velocity_mps=(0.0, 0.0, 0.0),
+        yaw_rad=0.0,
+        armed=True,
+        in_air=True,
+        mode="offboard",
+    )
+    return wire.StateBody(
+        phase="formation", settings=wire.SettingsBody(rev=1), autopilot=telemetry, gps_offset_m=offset
+    )
+
+
+def _published_until(publish, body, condition):
+    """Publish body every 20 ms until condition() holds (the first may go out before the link is up)."""
+    wait_for(lambda: publish(body) > 0 and condition())
+
+
+def test_an_agents_gps_offset_reaches_the_station_which_places_it_where_its_controller_believes(reporter):
+    fleet, publish = reporter
+    vehicle = lambda: fleet.snapshot().vehicles[0]  # noqa: E731
+    _published_until(publish, _report((0.5, -0.25, 0.125)), lambda: vehicle().autopilot is not None)
+    assert tuple(vehicle().gps_offset_m) == (0.5, -0.25, 0.125)
+    assert tuple(vehicle().believed_position_m) == (4.5, 1.25, 7.875)
+
+
+def test_a_non_finite_gps_offset_is_counted_as_a_bad_report_and_not_used(reporter):
+    fleet, publish = reporter
+    _published_until(
+        publish, _report((float("nan"), 0.0, 0.0)), lambda: fleet.snapshot() and fleet.bad_reports > 0
+    )
+    assert tuple(fleet.snapshot().vehicles[0].gps_offset_m) == (0.0, 0.0, 0.0)

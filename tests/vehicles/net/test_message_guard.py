@@ -19,7 +19,12 @@ TEAM = "alpha"
 def plan(vid: int = 2, stamp: float = 100.0) -> HorizonPlan:
     positions = np.cumsum(np.full((17, 3), 0.1), axis=0)
     return HorizonPlan(
-        vehicle_id=vid, stamp_s=stamp, dt_s=0.1, positions_m=positions, velocities_mps=np.ones((17, 3))
+        vehicle_id=vid,
+        stamp_s=stamp,
+        dt_s=0.1,
+        positions_m=positions,
+        velocities_mps=np.ones((17, 3)),
+        gps_offset_m=np.array([0.25, -0.5, 0.125]),
     )
 
 
@@ -40,6 +45,7 @@ def test_a_plan_round_trips_through_the_wire_exactly():
     assert np.array_equal(back.positions_m, original.positions_m)
     assert np.array_equal(back.velocities_mps, original.velocities_mps)
     assert back.stamp_s == original.stamp_s and back.dt_s == original.dt_s
+    assert np.array_equal(back.gps_offset_m, original.gps_offset_m)
 
 
 def test_telemetry_and_detections_round_trip():
@@ -141,6 +147,10 @@ def test_non_finite_plan_values_are_refused_by_the_conversion():
     bad = msgspec.structs.replace(body, positions_m=[(float("nan"), 0.0, 0.0)] * 17)
     with pytest.raises(ValueError):
         wire.plan_from_wire(bad, vehicle_id=2)
+    with pytest.raises(ValueError):
+        wire.plan_from_wire(
+            msgspec.structs.replace(body, gps_offset_m=(0.0, float("inf"), 0.0)), vehicle_id=2
+        )
 
 
 def test_keys_parse_back_and_reject_strangers():
