@@ -50,8 +50,8 @@ class RunSettings:
     latency_s: link latency; gps_drift; virtual_obstacles: none or paper (the paper's SE4); rate_hz: control
     rate (the paper: 100 Hz); replan_hz: 0 solves every MPC every tick (the paper), a positive rate <= rate_hz
     at most that often, following the latest plan in between (vehicles/agent.py); gps_offset: each MAV
-    estimates its GPS offset relative to the team and places its teammates by it (controller/gps_offset.py;
-    False: it takes their plans as their GPS puts them, as the paper's MAVs did).
+    estimates its GPS offset relative to the team and places its teammates by it in its separation rows
+    (controller/gps_offset.py; False: it takes their plans as their GPS puts them, as the paper's MAVs did).
     """
 
     vehicles: int = 3

@@ -1,13 +1,14 @@
-"""The agent learns its GPS offset relative to the team from its detections, publishes it with its plans, and
-places its teammates' plans by both offsets."""
+"""The agent learns its GPS offset relative to the team from its detections and publishes it with its plans;
+its separation rows place its teammates by both offsets."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_agent import _plan as still_plan
 
 from controller.messages import Detection, HorizonPlan
-from controller.params import ControllerParams
 from vehicles.agent import Agent, AgentInputs, AgentOutputs, AgentParams, AgentRole
 from vehicles.autopilot import AutopilotState, FlightMode
 
@@ -47,15 +48,8 @@ def _fly(agent, *, seconds, teammates=(2, 3, 4), seed=1, t0=0.0) -> AgentOutputs
 
 
 def _plan(vid, t, pos, offset):
-    n = ControllerParams().mpc.horizon_steps + 2
-    return HorizonPlan(
-        vehicle_id=vid,
-        stamp_s=t,
-        dt_s=0.1,
-        positions_m=np.tile(pos, (n, 1)),
-        velocities_mps=np.zeros((n, 3)),
-        gps_offset_m=np.asarray(offset, dtype=float),
-    )
+    """test_agent's still plan, carrying the sender's GPS offset."""
+    return replace(still_plan(vid, t, pos), gps_offset_m=np.asarray(offset, dtype=float))
 
 
 def test_with_three_teammates_it_learns_three_quarters_of_its_offset():
