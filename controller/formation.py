@@ -163,6 +163,7 @@ class FormationController:
         self._mpc.reset()
         self._prev_plan: HorizonPlan | None = None
         self._last_position: np.ndarray | None = None
+        self._formed = False  # flown a tick of formation flight (not a hold) since the last reset
         self._counts = dict.fromkeys(ControllerStats.__dataclass_fields__, 0)
 
     # ------------------------------------------------------------------------------------------------ step
@@ -187,9 +188,10 @@ class FormationController:
         for a MAV that left formation control (its plan says so; it neither spaces itself nor steers its
         approach angle); preferred_bearing_rad: when given, the terminal reference lies at this ENU bearing
         about the person (the roster slot 2 pi k / K of a MAV without fresh teammate information) instead of
-        at the current bearing; hold: rest where it is, at h_des above the person, on a plan without the
-        external inputs (whose pushes a silent teammate could not foresee), keeping the separation rows of
-        what it is given (the agent gives no teammates: vehicles/agent.py), and no escape (the hold is one).
+        at the current bearing; hold: rest where it is (climbing to h_des above the person only before
+        formation flight has begun: `_hold_target`), on a plan without the external inputs (whose pushes a
+        silent teammate could not foresee), keeping the separation rows of what it is given (the agent
+        gives no teammates: vehicles/agent.py), and no escape (the hold is one).
         """
         self._counts["ticks"] += 1
         start_p, start_v = self._start_state(now_s, own)
@@ -269,6 +271,7 @@ class FormationController:
         if not _finite(wp_p, wp_v, wp_a):
             return self._brake(tick, SolveStatus.BRAKING, "the way-point was not finite")
         self._prev_plan = plan
+        self._formed = self._formed or not hold
         self._counts["solved"] += 1
         if escape is not None:
             self._counts["escapes"] += 1
@@ -494,8 +497,12 @@ class FormationController:
     def _hold_target(
         self, tick: _Tick, person: PersonEstimate, formation: FormationParams
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Where a hold aims: rest at the start position, at h_des above the person, inside the arena."""
-        return self._rest_at(tick, float(person.position_m[2]) + formation.h_des_m)
+        """Where a hold aims: rest at the start position, inside the arena; at h_des above the person while
+        formation flight has not begun (after take-off), at the start height once it has. A hold keeps no
+        teammate rows, so it must not climb or sink into the height a teammate took to get out of the way
+        (an escape separates vertically)."""
+        height = float(tick.start_p[2]) if self._formed else float(person.position_m[2]) + formation.h_des_m
+        return self._rest_at(tick, height)
 
     def _rest_at(self, tick: _Tick, height_m: float) -> tuple[np.ndarray, np.ndarray]:
         """A resting aim (zero velocity) above the start position at height_m, clipped into the arena."""
@@ -568,6 +575,7 @@ class FormationController:
             velocities_mps=velocities,
             in_formation=tick.in_formation,
             position_cov_m2=cov if _finite(cov) else DEFAULT_COV_M2,
+            gps_offset_m=tick.own.gps_offset_m,
         )
 
     def _waypoint(self, plan: HorizonPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

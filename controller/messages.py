@@ -186,7 +186,7 @@ class SolveStatus(str, Enum):  # noqa: UP042 - str() and format() must stay as t
     BRAKING = "braking"  # the solver failed or an input was not finite: a braking plan is applied instead
     NO_PERSON = "no_person"  # no person estimate yet: hold position
     ESCAPE = "escape"  # the separation rows could not all hold: braking (and separating vertically) instead
-    HOLD = "hold"  # a teammate unheard too long: rest where it is at the formation height (vehicles/agent.py)
+    HOLD = "hold"  # a teammate unheard too long: rest where it is (vehicles/agent.py)
 
 
 @dataclass(frozen=True, eq=False)

@@ -17,9 +17,10 @@ The paper's repulsive fields (eqs. 13, 15) shape the plan but promise nothing. T
 - **Teammates that do not cooperate** (out of formation: taking off, holding, landing; or silent longer than
   `cooperative_age_s`): we keep the whole distance from their (aligned, possibly extrapolated) plan,
   separation_m + inflation_j from m_j(n), and the braking room of the whole closing speed at the last step.
-- **Trunks.** A vertical plane tangent to the trunk's cylinder grown by `obstacle_clearance_m` (and our
-  covariance radius), facing our planned position, at every step where that position is below the trunk's
-  top; the disc lies wholly behind the plane, so keeping to the plane keeps clear of the disc. The plane is
+- **Trunks.** A vertical plane tangent to the trunk's cylinder grown by `obstacle_clearance_m` (and
+  `obstacle_sigmas` times our covariance radius), facing our planned position, at every step where that
+  position is below the trunk's top; the disc lies wholly behind the plane, so keeping to the plane keeps
+  clear of the disc. The plane is
   moved out by how far the vehicle lags its plan towards the trunk (`lag_m`): the row is for the vehicle.
 
 All rows are soft with one exact penalty (controller/mpc.py `HalfPlanes`): the QP is never infeasible, and
@@ -49,6 +50,10 @@ class SeparationParams:
         covariance radii, the plans' age): above the 1.5 m the safety sweep checks by about what following a
         plan costs, and small enough that 16 MAVs on the d_des = 8 m circle (3.12 m apart) hold their rows.
     obstacle_clearance_m: the distance every planned position keeps from a trunk's surface.
+    obstacle_sigmas: how many of our self-localisation std (the covariance radius, eq. 15's r_sigma) the trunk
+        rows keep beyond obstacle_clearance_m: trunks are mapped in the true world and our GPS error along a
+        row's normal is unknown, so a row 1 sigma out is crossed by 16 % of the GPS errors, 1.5 sigma by 7 %
+        (with 2, 3 of the 12 paper flights left their formation bounds: docs/safety.md).
     step_brake_mps2, brake_mps2: the decelerations whose braking distance each cooperative row keeps (before
         the last step, and at it); brake_margin_max_m caps that room.
     cooperative_age_s: a teammate whose plan is older than this is not trusted to hold its own row.
@@ -71,6 +76,7 @@ class SeparationParams:
     enabled: bool = True
     separation_m: float = 1.6
     obstacle_clearance_m: float = 0.2
+    obstacle_sigmas: float = 1.5
     step_brake_mps2: float = 3.0
     brake_mps2: float = 2.0
     brake_margin_max_m: float = 4.0
@@ -208,7 +214,9 @@ def obstacle_rows(
     normals_xy = np.where(
         dist[..., None] > 1e-6, rel / np.maximum(dist, 1e-12)[..., None], np.array([1.0, 0.0])
     )
-    grown = obstacles.radii_m + params.obstacle_clearance_m + own_cov_radius_m  # (M,)
+    grown = (
+        obstacles.radii_m + params.obstacle_clearance_m + params.obstacle_sigmas * own_cov_radius_m
+    )  # (M,)
     offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown[:, None]
     below = own_path_m[None, :, 2] < obstacles.heights_m[:, None] + params.obstacle_clearance_m
     near = dist - grown[:, None] < params.row_reach_m
@@ -335,7 +343,7 @@ def _compiled_rows(
         np.ascontiguousarray(obstacles.centers_m, dtype=float),
         np.asarray(obstacles.radii_m, dtype=float),
         np.asarray(obstacles.heights_m, dtype=float),
-        params.obstacle_clearance_m + float(own_cov_radius),
+        params.obstacle_clearance_m + params.obstacle_sigmas * float(own_cov_radius),
         params.obstacle_clearance_m,
         params.row_reach_m,
         params.obstacle_row_weight,

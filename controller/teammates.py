@@ -102,38 +102,42 @@ class TeammateTable:
     not older than a limit, plus optional extra plans (the agent's phantoms), for the formation controller.
     """
 
-    _COLUMNS = ("_positions", "_lengths", "_stamps", "_dts", "_radii", "_in_formation", "_row_ids")
+    _COLUMNS = (
+        "_positions",
+        "_offsets",
+        "_lengths",
+        "_stamps",
+        "_dts",
+        "_radii",
+        "_in_formation",
+        "_row_ids",
+    )
 
     def __init__(self, *, own_id: int, plan_length: int, capacity: int = 16) -> None:
         self._own = int(own_id)
         self._plans: dict[int, HorizonPlan] = {}
         self._count = 0
         capacity, length = max(int(capacity), 1), max(int(plan_length), 2)
-        # Row r holds one teammate's latest plan: positions (capacity, length, 3), its valid length, stamp,
-        # step, covariance radius, in-formation flag and vehicle id; rows sorted by vehicle id.
+        # Row r holds one teammate's latest plan: positions (capacity, length, 3), the sender's GPS offset
+        # relative to the team (capacity, 3), its valid length, stamp, step, covariance radius, in-formation
+        # flag and vehicle id; rows sorted by vehicle id.
         self._positions = np.zeros((capacity, length, 3))
+        self._offsets = np.zeros((capacity, 3))
         self._lengths = np.zeros(capacity, dtype=np.int64)
         self._stamps = np.zeros(capacity)
         self._dts = np.ones(capacity)
         self._radii = np.zeros(capacity)
         self._in_formation = np.zeros(capacity, dtype=np.bool_)
         self._row_ids = np.zeros(capacity, dtype=np.int64)
-        self._offsets = np.zeros((capacity, 3))  # the sender's GPS offset relative to the team
 
     def _grow(self, capacity: int, length: int) -> None:
         """Re-allocate every column for `capacity` rows of `length` states, keeping the stored rows."""
         old = self._count
-        positions = np.zeros((capacity, length, 3))
-        positions[:old, : self._positions.shape[1]] = self._positions[:old]
-        self._positions = positions
-        offsets = np.zeros((capacity, 3))
-        offsets[:old] = self._offsets[:old]
-        self._offsets = offsets
-        for name in self._COLUMNS[1:]:
+        for name in self._COLUMNS:
             column = getattr(self, name)
-            fill = np.ones if name == "_dts" else np.zeros
-            grown = fill(capacity, dtype=column.dtype)
-            grown[:old] = column[:old]
+            shape = (capacity, length, 3) if name == "_positions" else (capacity, *column.shape[1:])
+            grown = (np.ones if name == "_dts" else np.zeros)(shape, dtype=column.dtype)
+            grown[(slice(old), *map(slice, column.shape[1:]))] = column[:old]
             setattr(self, name, grown)
 
     @property
@@ -177,7 +181,7 @@ class TeammateTable:
         if old is None:
             if self._count == self._positions.shape[0]:
                 self._grow(2 * self._count, self._positions.shape[1])
-            for name in (*self._COLUMNS, "_offsets"):
+            for name in self._COLUMNS:
                 arr = getattr(self, name)
                 arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
             self._count += 1

@@ -7,13 +7,14 @@ its detections at once). No clocks, no I/O: the deterministic simulation and the
 same `tick(now_s, inputs) -> outputs`.
 
 Communication loss: a MAV that has not heard a teammate of the roster for `blind_after_s` *holds*: it rests
-where it is, at the formation height, facing the person, until it has heard every one within
-`resume_within_s` (docs/safety.md#link-loss-the-hold). MAVs that cannot hear each other are kept apart by
-not moving: moving ones are not predictable. While a roster teammate is not in formation (taking off, or
-holding), or unheard with holds off (`blind_after_s` = 0, the paper's MAVs flying on blind), it is stood in
-for by a *phantom* plan at its roster slot (2 pi k / K about this MAV's person estimate, moving with the
-person), and this MAV aims at its own slot (docs/method.md#beyond-the-paper-the-team-without-its-links). A
-teammate's plan is forgotten after `teammate_timeout_s`.
+where it is (after take-off, at the formation height), facing the person, until it has heard every one
+within `resume_within_s` (docs/safety.md#link-loss-the-hold). MAVs that cannot hear each other are kept
+apart by not moving: moving ones are not predictable. While a roster teammate is not in formation (taking
+off, or holding), or unheard with holds off (`blind_after_s` = 0, the paper's MAVs flying on blind), it is
+stood in for by a *phantom* plan at its roster slot (2 pi k / K about this MAV's person estimate, moving
+with the person), and this MAV aims at its own slot
+(docs/method.md#beyond-the-paper-the-team-without-its-links). A teammate's plan is forgotten after
+`teammate_timeout_s`.
 
 Re-planning rate: by default the MPC is solved every control tick, as in the paper. With `replan_period_s`
 > 0 it is solved at most that often; in between, the set-point follows the latest plan (its state
@@ -28,7 +29,7 @@ so that its camera sweeps the surroundings and finds the person again, instead o
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
@@ -165,8 +166,15 @@ class _Step:
     used_slot: bool = False
 
 
-def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: bool = False) -> HorizonPlan:
-    """A plan that stays at the MAV's reported position (N+2 copies), for MAVs not under formation control."""
+def hold_plan(
+    *,
+    state: AutopilotState,
+    params: ControllerParams,
+    in_formation: bool = False,
+    gps_offset_m: np.ndarray | None = None,
+) -> HorizonPlan:
+    """A plan that stays at the MAV's reported position (N+2 copies), for MAVs not under formation control;
+    gps_offset_m (3,): the MAV's GPS offset estimate it carries (zeros: none)."""
     n = params.mpc.horizon_steps + 2
     return HorizonPlan(
         vehicle_id=state.vehicle_id,
@@ -176,6 +184,7 @@ def hold_plan(*, state: AutopilotState, params: ControllerParams, in_formation: 
         velocities_mps=np.zeros((n, 3)),
         in_formation=in_formation,
         position_cov_m2=state.position_cov_m2,
+        gps_offset_m=np.zeros(3) if gps_offset_m is None else gps_offset_m,
     )
 
 
@@ -241,26 +250,26 @@ class Agent:
         elif own is not None and inputs.role == AgentRole.FORMATION:
             step = self._replan(now_s, own, person, since, known, inputs)
         elif own is not None and inputs.role == AgentRole.AIRBORNE:
-            step = _Step(plan=hold_plan(state=own, params=self._params, in_formation=False))
-        offset = self._offset.offset_m if self._offset is not None else np.zeros(3)
-        plan = step.plan
-        if plan is not None and np.any(offset):
-            plan = replace(plan, gps_offset_m=offset)
+            step = _Step(plan=hold_plan(state=own, params=self._params, gps_offset_m=self._offset_m()))
         return AgentOutputs(
             stamp_s=now_s,
             setpoint=step.setpoint,
             control=step.control,
-            plan=plan,
+            plan=step.plan,
             person=person,
-            outbox=self._outbox(now_s, detections, plan),
+            outbox=self._outbox(now_s, detections, step.plan),
             tracker=self._tracker.stats(),
             counters=AgentCounters(**self._counts),
             teammates_known=known,
             used_slot=step.used_slot,
             fault=step.fault,
             camera=self._converter.stats() if self._converter is not None else None,
-            gps_offset_m=offset,
+            gps_offset_m=self._offset_m(),
         )
+
+    def _offset_m(self) -> np.ndarray:
+        """(3,) this MAV's GPS offset estimate relative to its team (zeros without the estimate)."""
+        return self._offset.offset_m if self._offset is not None else np.zeros(3)
 
     def _take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
         """Keep teammates' plans, fuse their detections and this MAV's own (the camera's pixel detections
@@ -346,7 +355,7 @@ class Agent:
                     velocity_mps=own.velocity_mps,
                     yaw_rad=own.yaw_rad,
                     position_cov_m2=own.position_cov_m2,
-                    gps_offset_m=self._offset.offset_m if self._offset is not None else np.zeros(3),
+                    gps_offset_m=self._offset_m(),
                 ),
                 person=person,
                 teammates=self._teammates.view(since_s, phantoms),
@@ -360,7 +369,9 @@ class Agent:
             counts["controller_errors"] += 1
             self._last_control = None
             return _Step(
-                plan=hold_plan(state=own, params=self._params, in_formation=True),
+                plan=hold_plan(
+                    state=own, params=self._params, in_formation=True, gps_offset_m=self._offset_m()
+                ),
                 setpoint=Setpoint(
                     stamp_s=now_s, position_m=own.position_m, velocity_mps=np.zeros(3), yaw_rad=own.yaw_rad
                 ),

@@ -468,10 +468,10 @@ class AgentFleet:
                     yaw_rad=s.setpoint_yaw_rad,
                 )
             if s.gps_offset_m is not None:
-                gps_offset = np.array(s.gps_offset_m, dtype=float)
-                if not np.all(np.isfinite(gps_offset)):
-                    gps_offset = np.zeros(3)
+                reported = np.array(s.gps_offset_m, dtype=float)
+                if not np.all(np.isfinite(reported)):
                     raise ValueError("the GPS offset is not finite")
+                gps_offset = reported
         except (ValueError, TypeError):
             self.bad_reports += 1  # an agent reported values its own types refuse: shown as unknown
         agent_now = utc + (offset or 0.0)

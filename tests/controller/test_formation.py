@@ -259,6 +259,37 @@ def test_price_aims_at_zero_terminal_velocity():
     np.testing.assert_allclose(out.plan.velocities_mps[-1], 0.0, atol=0.05)
 
 
+# ----------------------------------------------------------------------------------------------- hold
+def hold_from_6_m(ctrl: FormationController, ticks: int = 20):
+    """Hold for `ticks` ticks, from 6 m (the formation height is 8.9 m), the vehicle on its plans."""
+    out = step(ctrl, state(on_circle(0.0, 8.0, 6.0)), hold=True)
+    for tick in range(1, ticks):
+        out = step(ctrl, state(out.plan.positions_m[1]), now_s=0.1 * tick, hold=True)
+    return out
+
+
+def test_a_hold_before_formation_flight_climbs_to_the_formation_height():
+    """After take-off: climbing towards 8.9 m at up to the 0.5 m/s vertical bound, 0.83 m in 1.9 s."""
+    out = hold_from_6_m(controller())
+    assert out.status == SolveStatus.HOLD
+    assert out.plan.positions_m[0, 2] == pytest.approx(6.83, abs=0.02)
+
+
+def test_a_hold_after_formation_flight_rests_at_its_height():
+    """A holding MAV keeps no teammate rows: it must not climb into the height a teammate escaped to."""
+    ctrl = controller()
+    step(ctrl, state(on_circle(0.0, 8.0, 6.0)))  # one tick of formation flight
+    out = hold_from_6_m(ctrl)
+    np.testing.assert_allclose(out.plan.positions_m[:, 2], 6.0, atol=0.01)
+
+
+def test_reset_makes_the_next_hold_climb_again():
+    ctrl = controller()
+    step(ctrl, state(on_circle(0.0, 8.0, 6.0)))
+    ctrl.reset()  # landed
+    assert hold_from_6_m(ctrl).plan.positions_m[0, 2] > 6.8
+
+
 # ------------------------------------------------------------------------------------------ bad input
 def test_no_person_brakes_to_rest():
     ctrl = controller()

@@ -124,7 +124,7 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
         (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
     )
     path = line([0.0, 1.0, 8.0], [1.0, 0.0, 0.0])
-    unweighted = SeparationParams(obstacle_row_weight=1.0, row_reach_m=30.0)
+    unweighted = SeparationParams(obstacle_row_weight=1.0, row_reach_m=30.0, obstacle_sigmas=1.0)
     steps, normals, offsets = obstacle_rows(
         own_path_m=path, obstacles=trunk, own_cov_radius_m=0.2, params=unweighted
     )
@@ -134,6 +134,30 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
     for n, b in zip(normals, offsets, strict=True):
         assert np.max(disc @ n[:2] - b) <= 1e-9  # the grown disc lies behind the plane
         assert np.max(disc @ n[:2] - b) == pytest.approx(0.0, abs=0.005)  # and touches it: tangent
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_trunk_row_keeps_one_and_a_half_own_covariance_radii_beyond_the_clearance(compiled):
+    """The trunk is mapped in the true world, our GPS error along the row is unknown: with a 0.5 m covariance
+    radius the plane stands 0.5 (trunk) + 0.2 (clearance) + 1.5 * 0.5 = 1.45 m from the centre."""
+    trunk = ObstacleSet.from_obstacles(
+        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
+    )
+    rows = separation_rows(
+        own_path_m=line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0]),
+        own_velocities_mps=np.zeros((STEPS, 3)),
+        mates=mates(np.zeros((0, STEPS, 3))),
+        mate_ages_s=np.zeros(0),
+        inflation_m=np.zeros(0),
+        obstacles=trunk,
+        own_cov_radius_m=0.5,
+        dt_s=DT,
+        own_id=0,
+        params=PARAMS,
+        compiled=compiled,
+    )
+    limit = rows.planes.offsets / rows.planes.normals_xy[:, 0]  # x <= b / n
+    np.testing.assert_allclose(limit, 5.0 - 1.45, atol=1e-12)
 
 
 def test_a_trunk_row_weighs_more_than_a_teammate_row():
