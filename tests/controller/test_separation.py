@@ -119,14 +119,36 @@ def test_coincident_plans_split_along_x_by_vehicle_id():
     assert np.all(low.planes.normals_xy[:, 0] == -1.0) and np.all(high.planes.normals_xy[:, 0] == 1.0)
 
 
+TRUNK_AT_5_M = ObstacleSet.from_obstacles(
+    (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
+)
+
+
+def trunk_limit_x_m(*, own_cov_radius_m=0.0, lag_m=None, compiled=True) -> np.ndarray:
+    """(R,) how far east each trunk row lets a MAV resting at (0, 0, 8) go (x <= b / n), the trunk 5 m
+    east."""
+    planes = separation_rows(
+        own_path_m=line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0]),
+        own_velocities_mps=np.zeros((STEPS, 3)),
+        mates=mates(np.zeros((0, STEPS, 3))),
+        mate_ages_s=np.zeros(0),
+        inflation_m=np.zeros(0),
+        obstacles=TRUNK_AT_5_M,
+        own_cov_radius_m=own_cov_radius_m,
+        dt_s=DT,
+        own_id=0,
+        params=PARAMS,
+        lag_m=lag_m,
+        compiled=compiled,
+    ).planes
+    return planes.offsets / planes.normals_xy[:, 0]
+
+
 def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behind_it():
-    trunk = ObstacleSet.from_obstacles(
-        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
-    )
     path = line([0.0, 1.0, 8.0], [1.0, 0.0, 0.0])
     unweighted = SeparationParams(obstacle_row_weight=1.0, row_reach_m=30.0, obstacle_sigmas=1.0)
     steps, normals, offsets = obstacle_rows(
-        own_path_m=path, obstacles=trunk, own_cov_radius_m=0.2, params=unweighted
+        own_path_m=path, obstacles=TRUNK_AT_5_M, own_cov_radius_m=0.2, params=unweighted
     )
     assert steps.tolist() == list(range(1, STEPS))
     angles = np.linspace(0.0, 2.0 * np.pi, 73)
@@ -140,33 +162,17 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
 def test_a_trunk_row_keeps_one_and_a_half_own_covariance_radii_beyond_the_clearance(compiled):
     """The trunk is mapped in the true world, our GPS error along the row is unknown: with a 0.5 m covariance
     radius the plane stands 0.5 (trunk) + 0.2 (clearance) + 1.5 * 0.5 = 1.45 m from the centre."""
-    trunk = ObstacleSet.from_obstacles(
-        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
+    np.testing.assert_allclose(
+        trunk_limit_x_m(own_cov_radius_m=0.5, compiled=compiled), 5.0 - 1.45, atol=1e-12
     )
-    rows = separation_rows(
-        own_path_m=line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0]),
-        own_velocities_mps=np.zeros((STEPS, 3)),
-        mates=mates(np.zeros((0, STEPS, 3))),
-        mate_ages_s=np.zeros(0),
-        inflation_m=np.zeros(0),
-        obstacles=trunk,
-        own_cov_radius_m=0.5,
-        dt_s=DT,
-        own_id=0,
-        params=PARAMS,
-        compiled=compiled,
-    )
-    limit = rows.planes.offsets / rows.planes.normals_xy[:, 0]  # x <= b / n
-    np.testing.assert_allclose(limit, 5.0 - 1.45, atol=1e-12)
 
 
 def test_a_trunk_row_weighs_more_than_a_teammate_row():
     """Scaled by obstacle_row_weight: of the rows' shared slack a trunk row gets a fifth of a teammate's."""
-    trunk = ObstacleSet.from_obstacles(
-        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
-    )
     path = line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0])
-    _, normals, offsets = obstacle_rows(own_path_m=path, obstacles=trunk, own_cov_radius_m=0.0, params=PARAMS)
+    _, normals, offsets = obstacle_rows(
+        own_path_m=path, obstacles=TRUNK_AT_5_M, own_cov_radius_m=0.0, params=PARAMS
+    )
     np.testing.assert_allclose(normals[:, 0], -5.0)
     np.testing.assert_allclose(offsets, -5.0 * (5.0 - 0.7))  # the plane 0.5 + 0.2 m from the centre
 
@@ -174,27 +180,7 @@ def test_a_trunk_row_weighs_more_than_a_teammate_row():
 def test_a_vehicle_lagging_its_plan_towards_a_trunk_tightens_the_trunk_row_by_that_lag():
     """The follower runs up to the leash behind its plan: a trunk row holds for where the vehicle is, so a
     lag of 0.4 m towards the trunk moves the plane 0.4 m out; a lag away from it leaves the plane alone."""
-    trunk = ObstacleSet.from_obstacles(
-        (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=12.0),)
-    )
-    still = line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0])
-
-    def planes(lag_x_m: float) -> HalfPlanes:
-        return separation_rows(
-            own_path_m=still,
-            own_velocities_mps=np.zeros((STEPS, 3)),
-            mates=mates(np.zeros((0, STEPS, 3))),
-            mate_ages_s=np.zeros(0),
-            inflation_m=np.zeros(0),
-            obstacles=trunk,
-            own_cov_radius_m=0.0,
-            dt_s=DT,
-            own_id=0,
-            params=PARAMS,
-            lag_m=np.array([lag_x_m, 0.0, 0.0]),
-        ).planes
-
-    limit = {lag: (p := planes(lag)).offsets / p.normals_xy[:, 0] for lag in (0.0, 0.4, -0.4)}  # x <= b / n
+    limit = {lag: trunk_limit_x_m(lag_m=np.array([lag, 0.0, 0.0])) for lag in (0.0, 0.4, -0.4)}
     np.testing.assert_allclose(limit[0.0], 4.3, atol=1e-12)
     np.testing.assert_allclose(limit[0.4], 3.9, atol=1e-12)
     np.testing.assert_allclose(limit[-0.4], 4.3, atol=1e-12)
@@ -205,7 +191,10 @@ def test_no_trunk_row_above_the_trunk_top():
         (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=6.0),)
     )
     steps, _, _ = obstacle_rows(
-        own_path_m=line([0.0, 1.0, 8.0], [1, 0, 0]), obstacles=trunk, own_cov_radius_m=0.0, params=PARAMS
+        own_path_m=line([0.0, 1.0, 8.0], [1, 0, 0]),
+        obstacles=trunk,
+        own_cov_radius_m=0.0,
+        params=PARAMS,
     )
     assert steps.size == 0
 
