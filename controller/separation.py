@@ -20,8 +20,8 @@ The paper's repulsive fields (eqs. 13, 15) shape the plan but promise nothing. T
 - **Trunks.** A vertical plane tangent to the trunk's cylinder grown by `obstacle_clearance_m` (and
   `obstacle_sigmas` times our covariance radius), facing our planned position, at every step where that
   position is below the trunk's top; the disc lies wholly behind the plane, so keeping to the plane keeps
-  clear of the disc. The plane is
-  moved out by how far the vehicle lags its plan towards the trunk (`lag_m`): the row is for the vehicle.
+  clear of the disc. The plane is moved out by how far the vehicle lags its plan towards the trunk
+  (`lag_m`): the row is for the vehicle.
 
 All rows are soft with one exact penalty (controller/mpc.py `HalfPlanes`): the QP is never infeasible, and
 whenever the rows can all hold the plan holds them exactly. When they cannot (squeezed between trunks, a
@@ -196,6 +196,11 @@ def teammate_rows(
     return s, normals[j, s], a_dot_m[j, s] + keep[j, s], dist_all
 
 
+def trunk_margin_m(params: SeparationParams, own_cov_radius_m: float) -> float:
+    """How far (m) every trunk row stands off the bark: the clearance and obstacle_sigmas covariance radii."""
+    return params.obstacle_clearance_m + params.obstacle_sigmas * own_cov_radius_m
+
+
 def obstacle_rows(
     *,
     own_path_m: np.ndarray,
@@ -214,9 +219,7 @@ def obstacle_rows(
     normals_xy = np.where(
         dist[..., None] > 1e-6, rel / np.maximum(dist, 1e-12)[..., None], np.array([1.0, 0.0])
     )
-    grown = (
-        obstacles.radii_m + params.obstacle_clearance_m + params.obstacle_sigmas * own_cov_radius_m
-    )  # (M,)
+    grown = obstacles.radii_m + trunk_margin_m(params, own_cov_radius_m)  # (M,)
     offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown[:, None]
     below = own_path_m[None, :, 2] < obstacles.heights_m[:, None] + params.obstacle_clearance_m
     near = dist - grown[:, None] < params.row_reach_m
@@ -343,7 +346,7 @@ def _compiled_rows(
         np.ascontiguousarray(obstacles.centers_m, dtype=float),
         np.asarray(obstacles.radii_m, dtype=float),
         np.asarray(obstacles.heights_m, dtype=float),
-        params.obstacle_clearance_m + params.obstacle_sigmas * float(own_cov_radius),
+        trunk_margin_m(params, float(own_cov_radius)),
         params.obstacle_clearance_m,
         params.row_reach_m,
         params.obstacle_row_weight,

@@ -7,7 +7,7 @@ its detections at once). No clocks, no I/O: the deterministic simulation and the
 same `tick(now_s, inputs) -> outputs`.
 
 Communication loss: a MAV that has not heard a teammate of the roster for `blind_after_s` *holds*: it rests
-where it is (after take-off, at the formation height), facing the person, until it has heard every one
+where it is (right after take-off, at the formation height), facing the person, until it has heard every one
 within `resume_within_s` (docs/safety.md#link-loss-the-hold). MAVs that cannot hear each other are kept
 apart by not moving: moving ones are not predictable. While a roster teammate is not in formation (taking
 off, or holding), or unheard with holds off (`blind_after_s` = 0, the paper's MAVs flying on blind), it is
