@@ -229,6 +229,8 @@ def _start_serve(path: Path, *extra: str) -> tuple[subprocess.Popen, str]:
         "serve",
         "--port",
         "0",
+        "--viser-port",
+        "0",  # a free one: the default's "port 8080 is busy" line would name the operator page first
         "--rate",
         "20",
         "--log",

@@ -29,7 +29,19 @@ def rss_bytes(pid: int) -> int:
 
 def test_a_20_mb_body_gets_413_and_the_process_grows_by_less_than_50_mb():
     proc = subprocess.Popen(
-        [sys.executable, "-m", "server.cli", "serve", "--port", "0", "--rate", "20", "--no-log"],
+        [
+            sys.executable,
+            "-m",
+            "server.cli",
+            "serve",
+            "--port",
+            "0",
+            "--viser-port",
+            "0",
+            "--rate",
+            "20",
+            "--no-log",
+        ],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
