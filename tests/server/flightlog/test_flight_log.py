@@ -6,10 +6,8 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -19,6 +17,7 @@ import pytest
 from log_headers import log_header
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
+from serve_process import start_serve
 from typer.testing import CliRunner
 
 from server.cli import COMMANDS, _register, app
@@ -222,37 +221,7 @@ def test_serve_with_and_without_log_is_refused():
 
 
 def _start_serve(path: Path, *extra: str) -> tuple[subprocess.Popen, str]:
-    command = [
-        sys.executable,
-        "-m",
-        "server.cli",
-        "serve",
-        "--port",
-        "0",
-        "--viser-port",
-        "0",  # a free one: the default's "port 8080 is busy" line would name the operator page first
-        "--rate",
-        "20",
-        "--log",
-        str(path),
-        *extra,
-    ]
-    proc = subprocess.Popen(
-        command,
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    seen = ""
-    assert proc.stdout is not None
-    for line in proc.stdout:
-        seen += line
-        if line.startswith("Ctrl-C"):
-            break
-    api = next(w for w in seen.split() if w.startswith("http://127.0.0.1:") and w.endswith("/"))
-    return proc, api
+    return start_serve("--log", str(path), *extra)
 
 
 @pytest.mark.slow

@@ -4,13 +4,11 @@ length)."""
 
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import httpx
+from serve_process import start_serve
 from starlette.types import Message, Receive, Scope, Send
 
 from server.station.api.gate import Gate
@@ -28,34 +26,8 @@ def rss_bytes(pid: int) -> int:
 
 
 def test_a_20_mb_body_gets_413_and_the_process_grows_by_less_than_50_mb():
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "server.cli",
-            "serve",
-            "--port",
-            "0",
-            "--viser-port",
-            "0",
-            "--rate",
-            "20",
-            "--no-log",
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
+    proc, api = start_serve("--no-log")
     try:
-        seen = ""
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            seen += line
-            if line.startswith("Ctrl-C"):
-                break
-        api = next(w for w in seen.split() if w.startswith("http://127.0.0.1:") and w.endswith("/"))
         assert httpx.get(f"{api}api/state", timeout=10).status_code == 200
         before = rss_bytes(proc.pid)
         body = b"{" + b" " * (BODY_BYTES - 2) + b"}"
