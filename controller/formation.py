@@ -60,7 +60,14 @@ from controller.reference import (
     plan_state_at,
     terminal_reference,
 )
-from controller.separation import SeparationRows, age_margin_m, imminent_miss_m, separation_rows
+from controller.separation import (
+    SeparationRows,
+    age_margin_m,
+    held_rows,
+    imminent_miss_m,
+    separation_rows,
+    without_teammate_rows,
+)
 from controller.teammates import TeammateView, align_rows
 
 DEFAULT_COV_M2 = np.eye(3) * 0.25
@@ -190,8 +197,9 @@ class FormationController:
         about the person (the roster slot 2 pi k / K of a MAV without fresh teammate information) instead of
         at the current bearing; hold: rest where it is (climbing to h_des above the person only before
         formation flight has begun: `_hold_target`), on a plan without the external inputs (whose pushes a
-        silent teammate could not foresee), keeping the separation rows of what it is given (the agent
-        gives no teammates: vehicles/agent.py), and no escape (the hold is one).
+        silent teammate could not foresee), keeping the trunk rows and, once formation flight has begun,
+        the teammate rows eased to what braking on the spot keeps (`_hold_rows`), and no escape (the hold
+        is one).
         """
         self._counts["ticks"] += 1
         start_p, start_v = self._start_state(now_s, own)
@@ -220,6 +228,8 @@ class FormationController:
         else:
             target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
         rows = self._separation(tick, own_path, own_vel, mates, obstacle_set)
+        if hold and rows is not None:
+            rows = self._hold_rows(tick, rows)
         planes = rows.planes if rows is not None and rows.count else None
 
         def solve(aim_p: np.ndarray, aim_v: np.ndarray) -> MpcSolution:
@@ -473,6 +483,16 @@ class FormationController:
             lag_m=lag,
         )
 
+    def _hold_rows(self, tick: _Tick, rows: SeparationRows) -> SeparationRows:
+        """A hold's rows: once formation flight has begun, the teammate rows eased to what braking on the spot
+        at step_brake_mps2 keeps (`held_rows`: a hold entered fast must not slide onto a resting teammate,
+        and a neighbour's gap must not push a resting MAV about); before it (the climb after take-off, side
+        by side in a cluster), the trunk rows alone."""
+        if not self._formed:
+            return without_teammate_rows(rows)
+        decel = self._params.separation.step_brake_mps2
+        return held_rows(rows, start_m=tick.start_p, velocity_mps=tick.start_v, decel_mps2=decel)
+
     def _imminent_miss(self, sol: MpcSolution, planes: HalfPlanes | None) -> float:
         """How far a solved plan misses the separation rows of its first steps (0: none missed)."""
         if not sol.ok or planes is None or sol.half_plane_violation_m == 0.0:
@@ -498,9 +518,9 @@ class FormationController:
         self, tick: _Tick, person: PersonEstimate, formation: FormationParams
     ) -> tuple[np.ndarray, np.ndarray]:
         """Where a hold aims: rest at the start position, inside the arena; at h_des above the person while
-        formation flight has not begun (after take-off), at the start height once it has. A hold keeps no
-        teammate rows, so it must not climb or sink into the height a teammate took to get out of the way
-        (an escape separates vertically)."""
+        formation flight has not begun (after take-off), at the start height once it has: a hold's teammate
+        rows only stop it closing in, they do not make room, so it must not climb or sink into the height a
+        teammate took to get out of the way (an escape separates vertically)."""
         height = float(tick.start_p[2]) if self._formed else float(person.position_m[2]) + formation.h_des_m
         return self._rest_at(tick, height)
 

@@ -32,7 +32,7 @@ and separates vertically from the closest teammate, and counts it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -102,9 +102,8 @@ class SeparationParams:
 
 def row_margins(planes: HalfPlanes, positions_m: np.ndarray) -> np.ndarray:
     """(R,) a . p(step) - b of every row for plan positions (N+2, 3): >= 0 where the row holds."""
-    normals_z = np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
     p = positions_m[planes.steps]
-    return np.einsum("ri,ri->r", planes.normals_xy, p[:, :2]) + normals_z * p[:, 2] - planes.offsets
+    return np.einsum("ri,ri->r", planes.normals_xy, p[:, :2]) + _normals_z(planes) * p[:, 2] - planes.offsets
 
 
 def imminent_miss_m(planes: HalfPlanes, positions_m: np.ndarray, *, steps: int) -> float:
@@ -133,6 +132,43 @@ class SeparationRows:
     @property
     def count(self) -> int:
         return self.teammate_rows + self.obstacle_rows
+
+
+def held_rows(
+    rows: SeparationRows, *, start_m: np.ndarray, velocity_mps: np.ndarray, decel_mps2: float
+) -> SeparationRows:
+    """A hold's rows (formation.py): each teammate row eased to what braking on the spot can keep.
+
+    Braking at decel_mps2 against the start velocity (3,) m/s runs straight from start_m (3,) to the stop
+    point, so the path's least reach along a row's normal is at one of the two. A teammate row that this path
+    would break is moved back to that reach: a holding MAV closes on a teammate no further than braking
+    must, and a neighbour's gap never pushes a resting MAV about. Trunk rows stay as they are."""
+    t = rows.teammate_rows
+    if t == 0:
+        return rows
+    start = np.asarray(start_m, dtype=float)
+    v = np.asarray(velocity_mps, dtype=float)
+    stop = start + v * (np.linalg.norm(v) / (2.0 * decel_mps2))
+    planes = rows.planes
+    normals = np.column_stack([planes.normals_xy[:t], _normals_z(planes)[:t]])
+    offsets = planes.offsets.copy()
+    offsets[:t] = np.minimum(offsets[:t], np.minimum(normals @ start, normals @ stop))
+    return replace(rows, planes=replace(planes, offsets=offsets))
+
+
+def without_teammate_rows(rows: SeparationRows) -> SeparationRows:
+    """The trunk rows alone (a hold that climbs to its formation height after take-off: formation.py)."""
+    t = rows.teammate_rows
+    p = rows.planes
+    planes = HalfPlanes(
+        steps=p.steps[t:], normals_xy=p.normals_xy[t:], offsets=p.offsets[t:], normals_z=_normals_z(p)[t:]
+    )
+    return replace(rows, planes=planes, teammate_rows=0)
+
+
+def _normals_z(planes: HalfPlanes) -> np.ndarray:
+    """(R,) the rows' z normals (None in HalfPlanes means vertical planes: zeros)."""
+    return np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
 
 
 def age_margin_m(ages_s: np.ndarray, *, speed_term_m: np.ndarray, params: SeparationParams) -> np.ndarray:

@@ -336,8 +336,6 @@ class Agent:
         counts = self._counts
         hold_reason = self._hold_reason(now_s, inputs.roster)
         self._holding = hold = hold_reason is not None
-        if hold:  # no teammate rows (the trunks' stay): a neighbour's gap must not push a resting MAV about
-            since_s = math.inf
         slot = dict(inputs.roster).get(self.vehicle_id)
         used_slot = slot is not None and known < len(inputs.roster) - 1 and not hold
         phantoms: tuple[HorizonPlan, ...] = ()

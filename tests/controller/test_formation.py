@@ -276,7 +276,7 @@ def test_a_hold_before_formation_flight_climbs_to_the_formation_height():
 
 
 def test_a_hold_after_formation_flight_rests_at_its_height():
-    """A holding MAV keeps no teammate rows: it must not climb into the height a teammate escaped to."""
+    """A holding MAV must not climb into the height a teammate escaped to (its rows do not make room)."""
     ctrl = controller()
     step(ctrl, state(on_circle(0.0, 8.0, 6.0)))  # one tick of formation flight
     out = hold_from_6_m(ctrl)
@@ -288,6 +288,36 @@ def test_reset_makes_the_next_hold_climb_again():
     step(ctrl, state(on_circle(0.0, 8.0, 6.0)))
     ctrl.reset()  # landed
     assert hold_from_6_m(ctrl).plan.positions_m[0, 2] > 6.8
+
+
+def hold_closing_on(mate_position, *, speed_mps: float, ticks: int = 40) -> float:
+    """Enter a hold at speed_mps north, after a tick of formation flight, towards a teammate holding at
+    mate_position; fly on the plans for `ticks` ticks; return the closest the plan start came to it (m)."""
+    ctrl = controller()
+    here = on_circle(0.0)
+    step(ctrl, state(here))  # formation flight has begun
+    mate = [hold_plan(mate_position, in_formation=False)]
+    out = step(ctrl, state(here, (0.0, speed_mps, 0.0)), teammates=mate, hold=True)
+    closest = np.inf
+    for tick in range(1, ticks):
+        p, v = out.plan.positions_m[1], out.plan.velocities_mps[1]
+        out = step(ctrl, state(p, v), now_s=0.1 * tick, teammates=mate, hold=True)
+        closest = min(closest, float(np.linalg.norm(out.plan.positions_m[0] - mate_position)))
+    return closest
+
+
+def test_a_hold_entered_fast_brakes_short_of_a_resting_teammate():
+    """At 3.6 m/s towards a teammate 4.5 m ahead: the eased rows let the plan close no further than braking
+    at 3 m/s^2 must (2.16 m), and it stops 3.25 m short; the MPC's rest plan alone, which weighs effort,
+    stopped 2.21 m short."""
+    mate = on_circle(0.0) + np.array([0.0, 4.5, 0.0])
+    assert hold_closing_on(mate, speed_mps=3.6) == pytest.approx(3.25, abs=0.1)
+
+
+def test_a_resting_teammate_inside_the_gap_does_not_push_a_hold_about():
+    """A teammate 1.2 m away, well inside the 1.6 m gap: the holding MAV stays where it rests."""
+    mate = on_circle(0.0) + np.array([0.0, 1.2, 0.0])
+    assert hold_closing_on(mate, speed_mps=0.0, ticks=20) == pytest.approx(1.2, abs=0.01)
 
 
 # ------------------------------------------------------------------------------------------ bad input

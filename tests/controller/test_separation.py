@@ -13,10 +13,13 @@ from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
 from controller.params import ControllerParams
 from controller.separation import (
     SeparationParams,
+    SeparationRows,
     braking_room_m,
+    held_rows,
     obstacle_rows,
     row_margins,
     separation_rows,
+    without_teammate_rows,
 )
 
 PARAMS = SeparationParams()
@@ -197,6 +200,63 @@ def test_no_trunk_row_above_the_trunk_top():
         params=PARAMS,
     )
     assert steps.size == 0
+
+
+# ---------------------------------------------------------------------------------------- a hold's rows
+TRUNK_3_M_NORTH = ObstacleSet.from_obstacles(
+    (Obstacle(obstacle_id="n", center_m=np.array([0.0, 3.0]), radius_m=0.5, height_m=12.0),)
+)
+
+
+def holding_near_a_trunk(mate_x_m: float):
+    """Rows of a MAV resting at (0, 0, 8) with a teammate out of formation mate_x_m east (whole gap: 1.6 m)
+    and a trunk 3 m north."""
+    return rows_for(
+        line([0.0, 0.0, 8.0], [0, 0, 0]),
+        np.zeros((STEPS, 3)),
+        mates([line([mate_x_m, 0.0, 8.0], [0, 0, 0])], in_formation=False),
+        obstacles=TRUNK_3_M_NORTH,
+    )
+
+
+def teammate_x_limits(rows: SeparationRows) -> np.ndarray:
+    """How far east each teammate row lets the MAV go (rows facing west: x <= b / n)."""
+    t = rows.teammate_rows
+    return rows.planes.offsets[:t] / rows.planes.normals_xy[:t, 0]
+
+
+def test_a_hold_eases_a_teammate_row_to_where_braking_at_the_bound_stops():
+    """At 3 m/s east, braking at 3 m/s^2 stops 1.5 m on: a teammate 2 m east (its row at x <= 0.4) now
+    gets x <= 1.5."""
+    rows = holding_near_a_trunk(2.0)
+    held = held_rows(
+        rows, start_m=np.array([0.0, 0.0, 8.0]), velocity_mps=np.array([3.0, 0, 0]), decel_mps2=3.0
+    )
+    np.testing.assert_allclose(teammate_x_limits(rows), 0.4, atol=1e-12)
+    np.testing.assert_allclose(teammate_x_limits(held), 1.5, atol=1e-12)
+
+
+def test_a_hold_never_lets_a_teammate_row_push_it_away_from_where_it_rests():
+    rows = holding_near_a_trunk(1.0)  # the row wants x <= -0.6: 0.6 m west of where the MAV rests
+    held = held_rows(rows, start_m=np.array([0.0, 0.0, 8.0]), velocity_mps=np.zeros(3), decel_mps2=3.0)
+    np.testing.assert_allclose(teammate_x_limits(held), 0.0, atol=1e-12)
+
+
+def test_a_hold_keeps_a_teammate_row_that_braking_keeps_and_every_trunk_row_as_it_is():
+    rows = holding_near_a_trunk(4.0)  # the row at x <= 2.4 holds while braking from 1 m/s east
+    held = held_rows(
+        rows, start_m=np.array([0.0, 0.0, 8.0]), velocity_mps=np.array([1.0, 0, 0]), decel_mps2=3.0
+    )
+    assert rows.teammate_rows > 0 and rows.obstacle_rows > 0
+    np.testing.assert_array_equal(held.planes.offsets, rows.planes.offsets)
+
+
+def test_without_teammate_rows_leaves_the_trunk_rows_alone():
+    rows = holding_near_a_trunk(2.0)
+    trunks = without_teammate_rows(rows)
+    assert trunks.teammate_rows == 0 and trunks.obstacle_rows == rows.obstacle_rows > 0
+    np.testing.assert_array_equal(trunks.planes.offsets, rows.planes.offsets[rows.teammate_rows :])
+    np.testing.assert_array_equal(trunks.planes.steps, rows.planes.steps[rows.teammate_rows :])
 
 
 def test_parameters_out_of_range_are_refused():
