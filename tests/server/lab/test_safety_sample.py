@@ -3,8 +3,9 @@
 Runs 0-39 of `skyring experiment safety` (base seed 0: 3 to 16 MAVs, trees, link loss up to 100 %, the
 random runner, half of them from clustered starts), each flown for its first 20 s at 10 Hz: take-off,
 spreading out from the cluster and the first seconds of formation flight, where MAVs came closest before the
-separation rows. The whole 90 s runs, and all 1000 of them, are `skyring experiment safety` (about an hour
-on 2 cores: too long for the suite). The runs are split in four tests so that the suite's workers share them.
+separation rows. The whole 90 s runs, and all 1000 of them, are `skyring experiment safety` (6387 s on 2
+cores, docs/safety.md: too long for the suite). The runs are split in four tests so that the suite's
+workers share them.
 """
 
 import pytest
