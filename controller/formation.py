@@ -66,7 +66,6 @@ from controller.separation import (
     held_rows,
     imminent_miss_m,
     separation_rows,
-    without_teammate_rows,
 )
 from controller.teammates import TeammateView, align_rows
 
@@ -217,7 +216,9 @@ class FormationController:
         mp = self._mpc_params
         price = self._method == Method.PRICE
         obstacle_set = self._obstacles(obstacles)
-        mates = self._teammates(teammates, now_s, own)
+        # the climb after take-off (a hold before formation flight) keeps no teammate rows: see no teammates
+        climbing = hold and not self._formed
+        mates = self._teammates(() if climbing else teammates, now_s, own)
         own_path, own_vel = self._own_horizon(tick)
         if price or hold:
             f_total = np.zeros((self._steps, 3))
@@ -259,11 +260,12 @@ class FormationController:
 
         positions, velocities = sol.positions_m, sol.velocities_mps
         if price:
+            felt = self._teammates((), now_s, own) if hold else mates  # a hold feels no teammate's field
             field = price_field(
                 own_position_m=start_p,
                 goal_position_m=target,
-                teammate_positions_m=mates.positions_m[:, 0, :],
-                teammate_d_max_m=mates.d_max_m,
+                teammate_positions_m=felt.positions_m[:, 0, :],
+                teammate_d_max_m=felt.d_max_m,
                 obstacles=obstacle_set,
                 fields=self._params.fields,
                 params=self._params.price,
@@ -484,12 +486,10 @@ class FormationController:
         )
 
     def _hold_rows(self, tick: _Tick, rows: SeparationRows) -> SeparationRows:
-        """A hold's rows: once formation flight has begun, the teammate rows eased to what braking on the spot
-        at step_brake_mps2 keeps (`held_rows`: a hold entered fast must not slide onto a resting teammate,
-        and a neighbour's gap must not push a resting MAV about); before it (the climb after take-off, side
-        by side in a cluster), the trunk rows alone."""
-        if not self._formed:
-            return without_teammate_rows(rows)
+        """A hold's rows: the teammate rows eased to what braking on the spot at step_brake_mps2 keeps
+        (`held_rows`: a hold entered fast must not slide onto a resting teammate, and a neighbour's gap must
+        not push a resting MAV about). Before formation flight has begun (the climb after take-off, side by
+        side in a cluster) `step` gives a hold no teammates, so only the trunk rows are left."""
         decel = self._params.separation.step_brake_mps2
         return held_rows(rows, start_m=tick.start_p, velocity_mps=tick.start_v, decel_mps2=decel)
 

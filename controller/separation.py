@@ -156,16 +156,6 @@ def held_rows(
     return replace(rows, planes=replace(planes, offsets=offsets))
 
 
-def without_teammate_rows(rows: SeparationRows) -> SeparationRows:
-    """The trunk rows alone (a hold that climbs to its formation height after take-off: formation.py)."""
-    t = rows.teammate_rows
-    p = rows.planes
-    planes = HalfPlanes(
-        steps=p.steps[t:], normals_xy=p.normals_xy[t:], offsets=p.offsets[t:], normals_z=_normals_z(p)[t:]
-    )
-    return replace(rows, planes=planes, teammate_rows=0)
-
-
 def _normals_z(planes: HalfPlanes) -> np.ndarray:
     """(R,) the rows' z normals (None in HalfPlanes means vertical planes: zeros)."""
     return np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z

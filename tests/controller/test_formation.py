@@ -260,11 +260,11 @@ def test_price_aims_at_zero_terminal_velocity():
 
 
 # ----------------------------------------------------------------------------------------------- hold
-def hold_from_6_m(ctrl: FormationController, ticks: int = 20):
+def hold_from_6_m(ctrl: FormationController, ticks: int = 20, teammates=()):
     """Hold for `ticks` ticks, from 6 m (the formation height is 8.9 m), the vehicle on its plans."""
-    out = step(ctrl, state(on_circle(0.0, 8.0, 6.0)), hold=True)
+    out = step(ctrl, state(on_circle(0.0, 8.0, 6.0)), hold=True, teammates=teammates)
     for tick in range(1, ticks):
-        out = step(ctrl, state(out.plan.positions_m[1]), now_s=0.1 * tick, hold=True)
+        out = step(ctrl, state(out.plan.positions_m[1]), now_s=0.1 * tick, hold=True, teammates=teammates)
     return out
 
 
@@ -273,6 +273,26 @@ def test_a_hold_before_formation_flight_climbs_to_the_formation_height():
     out = hold_from_6_m(controller())
     assert out.status == SolveStatus.HOLD
     assert out.plan.positions_m[0, 2] == pytest.approx(6.83, abs=0.02)
+
+
+def test_a_hold_before_formation_flight_climbs_as_if_alone():
+    """The climb after take-off keeps no teammate rows: a teammate 1.2 m aside and 0.5 m above, inside the
+    1.6 m gap, leaves the plan exactly as it is with no teammate at all."""
+    beside = [hold_plan(on_circle(0.0, 8.0, 6.5) + np.array([0.0, 1.2, 0.0]), in_formation=False)]
+    alone = hold_from_6_m(controller()).plan.positions_m
+    np.testing.assert_array_equal(hold_from_6_m(controller(), teammates=beside).plan.positions_m, alone)
+
+
+def test_a_price_hold_feels_no_teammates_field():
+    """A hold flies without the fields a silent teammate cannot foresee, PRICE's repulsion included: a
+    teammate 1.2 m away leaves the resting plan as it is with no teammate at all."""
+    mate = [hold_plan(on_circle(0.0) + np.array([0.0, 1.2, 0.0]), in_formation=False)]
+    plans = []
+    for teammates in (mate, ()):
+        ctrl = controller(Method.PRICE)
+        step(ctrl, state(on_circle(0.0)))  # formation flight has begun
+        plans.append(step(ctrl, state(on_circle(0.0)), now_s=0.1, teammates=teammates, hold=True).plan)
+    np.testing.assert_allclose(plans[0].positions_m, plans[1].positions_m, atol=1e-9)
 
 
 def test_a_hold_after_formation_flight_rests_at_its_height():

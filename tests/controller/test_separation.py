@@ -19,7 +19,6 @@ from controller.separation import (
     obstacle_rows,
     row_margins,
     separation_rows,
-    without_teammate_rows,
 )
 
 PARAMS = SeparationParams()
@@ -249,14 +248,6 @@ def test_a_hold_keeps_a_teammate_row_that_braking_keeps_and_every_trunk_row_as_i
     )
     assert rows.teammate_rows > 0 and rows.obstacle_rows > 0
     np.testing.assert_array_equal(held.planes.offsets, rows.planes.offsets)
-
-
-def test_without_teammate_rows_leaves_the_trunk_rows_alone():
-    rows = holding_near_a_trunk(2.0)
-    trunks = without_teammate_rows(rows)
-    assert trunks.teammate_rows == 0 and trunks.obstacle_rows == rows.obstacle_rows > 0
-    np.testing.assert_array_equal(trunks.planes.offsets, rows.planes.offsets[rows.teammate_rows :])
-    np.testing.assert_array_equal(trunks.planes.steps, rows.planes.steps[rows.teammate_rows :])
 
 
 def test_parameters_out_of_range_are_refused():
