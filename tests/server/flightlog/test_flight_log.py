@@ -30,7 +30,6 @@ from vehicles.sim.scenario import Scenario, build_sim
 from webui.access import Principal, Role, Surface, acting_as
 
 RATE_HZ = 20.0  # control rate of these tests; the log samples at 5 Hz of mission time
-ROOT = Path(__file__).resolve().parents[3]
 _register("replay", COMMANDS["replay"])
 _register("serve", COMMANDS["serve"])
 ALICE = Principal(name="alice", role=Role.OPERATOR, surface=Surface.API, remote="192.0.2.7:5555")

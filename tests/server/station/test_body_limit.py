@@ -14,7 +14,6 @@ from starlette.types import Message, Receive, Scope, Send
 from server.station.api.gate import Gate
 from server.station.api.guard import DRAIN_LIMIT_BYTES, Guard
 
-ROOT = Path(__file__).resolve().parents[3]
 BODY_BYTES = 20 * 1024 * 1024
 
 
