@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, TextIO
@@ -244,24 +248,45 @@ def experiment(
         raise typer.Exit(code=1)
 
 
+class _Terminated(Exception):
+    """SIGTERM arrived: stop the runs as on Ctrl-C."""
+
+
+@contextmanager
+def _sigterm_stops_the_runs() -> Iterator[None]:
+    """Turn SIGTERM into `_Terminated` while the runs go, so that the runner stops its worker processes (as
+    on Ctrl-C) instead of the process dying and leaving them to finish their runs unwatched."""
+    if threading.current_thread() is not threading.main_thread():  # signals reach the main thread only
+        yield
+        return
+
+    def terminate(_signum: int, _frame: object) -> None:
+        raise _Terminated
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def _run_specs(
     specs: list[exp.RunSpec], *, jobs: int, out: Path, resume: bool, cluster: str | None
 ) -> list[exp.RunResult]:
     """The runs through the experiments' runner with progress; exit 2 on an unreachable cluster, 130 on
-    Ctrl-C."""
+    Ctrl-C, 143 on SIGTERM (the worker processes stopped in both)."""
     try:
-        with RunProgress(total=len(specs), stream=sys.stderr) as progress:
+        with _sigterm_stops_the_runs(), RunProgress(total=len(specs), stream=sys.stderr) as progress:
             return exp.run_all(
                 specs, jobs=jobs, out_dir=out, resume=resume, progress=progress, cluster=cluster
             )
     except ValueError as err:  # e.g. no scheduler at the cluster address
         typer.echo(f"error: {err}", err=True)
         raise typer.Exit(code=2) from None
-    except KeyboardInterrupt:
-        typer.echo(
-            f"\ninterrupted: the finished runs are kept under {out}; add --resume to continue", err=True
-        )
-        raise typer.Exit(code=130) from None
+    except (KeyboardInterrupt, _Terminated) as stop:
+        how = "terminated" if isinstance(stop, _Terminated) else "interrupted"
+        typer.echo(f"\n{how}: the finished runs are kept under {out}; add --resume to continue", err=True)
+        raise typer.Exit(code=143 if isinstance(stop, _Terminated) else 130) from None
 
 
 def _safety_command(
