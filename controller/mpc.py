@@ -10,8 +10,11 @@ The QP, with x(n) = [position, velocity] (6,) in ENU and W_E = input_weight * I3
     s.t.       x(n+1) = A x(n) + B (u(n) + f(n) + g),  n = 0..N                  (eq. 6)
                x_min - s <= x(n) <= x_max + s,  n = 1..N+1,  s >= 0                 (eq. 7, softened)
                u_min <= u(n) <= u_max                                            (eq. 8, hard)
+               a_min <= u(n) + f(n) <= a_max          (the plan's acceleration; `input_box`, hard)
 
-with c(n) = g ("hover"), f(n) + g ("planned") or 0 ("raw").
+with c(n) = g ("hover"), f(n) + g ("planned") or 0 ("raw"). The second box is skyring's: the paper bounds u
+alone, so a strong field made plans brake or swerve faster than any vehicle can (docs/safety.md, "Plans the
+vehicle can fly"); MpcParams.plan_acceleration_*_mps2 = None restores the paper's bound.
 
 Condensed form: the variables are z = [u(0..N) (N+1, 3) | s (6,)] and the states are affine in them,
 x(1..N+1) = h + G u, with h the free response to x(0) and f + g (`predict` with u = 0) and G the
@@ -73,6 +76,9 @@ class MpcParams:
     admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
     solution, non-convex) is a failure.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
+    plan_acceleration_min_mps2, plan_acceleration_max_mps2: bounds per axis on u(n) + f(n) (before gravity,
+    like the input box), the acceleration the plan asks of the vehicle with the fields included
+    (`input_box`); None for both is the paper as written (u alone is bounded).
     half_plane_weight, half_plane_quadratic_weight: the exact penalty per m of each plan step's largest
     violation of the soft half-planes a solve may be given (`HalfPlanes`), and its quadratic companion; far
     above slack_weight, so a half-plane gives way only when it cannot hold.
@@ -102,6 +108,8 @@ class MpcParams:
     violation_tolerance: float = 1.0e-4
     half_plane_weight: float = 1.0e5
     half_plane_quadratic_weight: float = 1.0e3
+    plan_acceleration_min_mps2: tuple[float, float, float] | None = (-3.0, -3.0, 3.0)
+    plan_acceleration_max_mps2: tuple[float, float, float] | None = (3.0, 3.0, 11.0)
 
     def __post_init__(self) -> None:
         if self.horizon_steps < 1:
@@ -112,11 +120,17 @@ class MpcParams:
             raise ValueError(f"effort must be one of {EFFORT_MODES}, got {self.effort!r}")
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
-        for name, lo, hi in (
+        bounds = [
             ("position", self.position_min_m, self.position_max_m),
             ("velocity", self.velocity_min_mps, self.velocity_max_mps),
             ("input", self.input_min_mps2, self.input_max_mps2),
-        ):
+        ]
+        if (self.plan_acceleration_min_mps2 is None) != (self.plan_acceleration_max_mps2 is None):
+            raise ValueError("plan_acceleration_min_mps2 and plan_acceleration_max_mps2: both or neither")
+        plan_min, plan_max = self.plan_acceleration_min_mps2, self.plan_acceleration_max_mps2
+        if plan_min is not None and plan_max is not None:
+            bounds.append(("plan acceleration", plan_min, plan_max))
+        for name, lo, hi in bounds:
             lo_a, hi_a = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
             if lo_a.shape != (3,) or hi_a.shape != (3,) or not np.all(np.isfinite(lo_a) & np.isfinite(hi_a)):
                 raise ValueError(f"{name} bounds must be 3 finite numbers each")
@@ -227,6 +241,25 @@ def predict(
     return positions, velocities
 
 
+def input_box(external_inputs_mps2: np.ndarray, params: MpcParams) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 3) lower and upper bounds of u(0..M-1) under the external inputs f (M, 3) (m/s^2, before gravity).
+
+    With the plan's acceleration bounded (params.plan_acceleration_*_mps2 = a_min, a_max), the input box
+    [u_min, u_max] intersected with [a_min - f(n), a_max - f(n)], so that u(n) + f(n) stays in [a_min, a_max];
+    where the two are disjoint (a field stronger than the boxes allow for), the single u of the second
+    nearest to the first: the plan then moves with the field at a_min or a_max, as far as a vehicle can.
+    Without it, the input box.
+    """
+    f = np.asarray(external_inputs_mps2, dtype=float)
+    lo = np.broadcast_to(np.asarray(params.input_min_mps2, dtype=float), f.shape)
+    hi = np.broadcast_to(np.asarray(params.input_max_mps2, dtype=float), f.shape)
+    if params.plan_acceleration_min_mps2 is None or params.plan_acceleration_max_mps2 is None:
+        return lo.copy(), hi.copy()
+    low = np.asarray(params.plan_acceleration_min_mps2, dtype=float) - f
+    high = np.asarray(params.plan_acceleration_max_mps2, dtype=float) - f
+    return np.clip(lo, low, high), np.clip(hi, low, high)
+
+
 def braking_plan(
     *, position_m: np.ndarray, velocity_mps: np.ndarray, params: MpcParams
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -306,6 +339,10 @@ class ModelPredictiveController:
         self._g = params.gravity_vector_mps2
         self._input_min = np.asarray(params.input_min_mps2, dtype=float)
         self._input_max = np.asarray(params.input_max_mps2, dtype=float)
+        bounded = params.plan_acceleration_min_mps2 is not None
+        self._plan_bounded = bounded
+        self._plan_min = np.asarray(params.plan_acceleration_min_mps2 if bounded else self._input_min, float)
+        self._plan_max = np.asarray(params.plan_acceleration_max_mps2 if bounded else self._input_max, float)
         self._state_min = np.concatenate([params.position_min_m, params.velocity_min_mps]).astype(float)
         self._state_max = np.concatenate([params.position_max_m, params.velocity_max_mps]).astype(float)
         self._free_x0, self._input_to_state = self._prediction_matrices()
@@ -497,6 +534,8 @@ class ModelPredictiveController:
         q[: self._nu] = (2.0 * prm.input_weight) * offset + self._q_terminal @ (free[-6:] - reference)
         q[self._nu :] = prm.slack_weight
         lo, hi = self._l_template.copy(), self._u_template.copy()
+        box_lo, box_hi = input_box(f, prm)
+        lo[: self._nu], hi[: self._nu] = box_lo.ravel(), box_hi.ravel()
         lo[self._lower_rows] -= free
         hi[self._upper_rows] -= free
         return q, lo, hi
@@ -597,8 +636,10 @@ class ModelPredictiveController:
                 np.empty(self._n_exact),
                 np.empty(qp.row_count),
                 np.empty(qp.resting_count),
+                np.empty((n, 3)),
+                np.empty((n, 3)),
             )
-        _, q, lo, hi, z, rows, gradient = self._work
+        _, q, lo, hi, z, rows, gradient, box_lo, box_hi = self._work
         inputs = np.empty((n, 3))
         positions = np.empty((n + 1, 3))
         velocities = np.empty((n + 1, 3))
@@ -623,8 +664,13 @@ class ModelPredictiveController:
             prm.dt_s,
             self._input_min,
             self._input_max,
+            self._plan_min,
+            self._plan_max,
+            self._plan_bounded,
             self._state_min_c,
             self._state_max_c,
+            box_lo,
+            box_hi,
             q,
             lo,
             hi,
@@ -670,8 +716,8 @@ class ModelPredictiveController:
                 f,
                 self._g,
                 prm.dt_s,
-                self._input_min,
-                self._input_max,
+                box_lo,
+                box_hi,
                 self._state_min_c,
                 self._state_max_c,
                 inputs,
@@ -860,7 +906,7 @@ class ModelPredictiveController:
             return self._failure(status, message, iterations, run_time)
 
         # The plan returned is the exact rollout of the box-clipped inputs: it obeys the dynamics exactly.
-        inputs = np.clip(result.x[: self._nu].reshape(n, 3), self._input_min, self._input_max)
+        inputs = np.clip(result.x[: self._nu].reshape(n, 3), *input_box(f, prm))
         positions, velocities = predict(
             position_m=arrays["position_m"],
             velocity_mps=arrays["velocity_mps"],

@@ -21,6 +21,27 @@ INVALID = 2  # an argument is not finite or beyond `plausible`: nothing is writt
 
 
 @numba.njit(cache=True)
+def input_box(
+    f: np.ndarray,
+    input_min: np.ndarray,
+    input_max: np.ndarray,
+    plan_min: np.ndarray,
+    plan_max: np.ndarray,
+    bound_plan: bool,
+    box_lo: np.ndarray,
+    box_hi: np.ndarray,
+) -> None:  # pragma: no cover - compiled; tested through ModelPredictiveController
+    """Write each step's input box (M, 3) into box_lo, box_hi: mpc.input_box's numbers (see there)."""
+    for n in range(f.shape[0]):
+        for a in range(3):
+            lo, hi = input_min[a], input_max[a]
+            if bound_plan:
+                low, high = plan_min[a] - f[n, a], plan_max[a] - f[n, a]
+                lo, hi = min(max(lo, low), high), min(max(hi, low), high)
+            box_lo[n, a], box_hi[n, a] = lo, hi
+
+
+@numba.njit(cache=True)
 def condensed_vectors(
     free_x0: np.ndarray,
     input_to_state: np.ndarray,
@@ -34,6 +55,8 @@ def condensed_vectors(
     effort: int,
     input_weight: float,
     slack_weight: float,
+    box_lo: np.ndarray,
+    box_hi: np.ndarray,
     q: np.ndarray,
     lo: np.ndarray,
     hi: np.ndarray,
@@ -41,8 +64,9 @@ def condensed_vectors(
     """Write q (n,), lo, hi (rows,) of the condensed QP (see mpc.py's module docstring).
 
     free_x0 (6M, 6), input_to_state (6M, 3M), q_terminal (3M, 6) = 2 G_N^T W; templates (rows,) hold the
-    input box, then the state upper rows (6M), the state lower rows (6M) and the slack rows; x0, reference
-    (6,), f (M, 3), gravity (3,); effort 0 = hover (u + g), 1 = planned (u + f + g), 2 = raw (u).
+    input rows (3M, overwritten by each step's box box_lo, box_hi (M, 3)), then the state upper rows (6M),
+    the state lower rows (6M) and the slack rows; x0, reference (6,), f (M, 3), gravity (3,); effort 0 =
+    hover (u + g), 1 = planned (u + f + g), 2 = raw (u).
     """
     m = f.shape[0]
     nu = 3 * m
@@ -53,6 +77,9 @@ def condensed_vectors(
             acc[3 * n + a] = f[n, a] + gravity[a]
     lo[:] = l_template
     hi[:] = u_template
+    for n in range(m):
+        for a in range(3):
+            lo[3 * n + a], hi[3 * n + a] = box_lo[n, a], box_hi[n, a]
     terminal = np.empty(6)
     for r in range(ns):
         s = 0.0
@@ -89,17 +116,18 @@ def rollout(
     f: np.ndarray,
     gravity: np.ndarray,
     dt: float,
-    input_min: np.ndarray,
-    input_max: np.ndarray,
+    box_lo: np.ndarray,
+    box_hi: np.ndarray,
     state_min: np.ndarray,
     state_max: np.ndarray,
     clipped: np.ndarray,
     positions: np.ndarray,
     velocities: np.ndarray,
 ) -> float:  # pragma: no cover - compiled; tested through ModelPredictiveController
-    """Clip inputs (M, 3) into their box (into `clipped`), roll the double integrator (eq. 6) forward from
-    position, velocity (3,) into positions, velocities (M+1, 3), and return the largest state-bound excursion
-    (m or m/s; NaN when something is not finite). Same arithmetic order as mpc.predict."""
+    """Clip inputs (M, 3) into each step's box box_lo, box_hi (M, 3) (into `clipped`), roll the double
+    integrator (eq. 6) forward from position, velocity (3,) into positions, velocities (M+1, 3), and return
+    the largest state-bound excursion (m or m/s; NaN when something is not finite). Same arithmetic order as
+    mpc.predict."""
     m = inputs.shape[0]
     half = 0.5 * dt * dt
     worst = -np.inf
@@ -112,7 +140,7 @@ def rollout(
         acc_sum = 0.0
         step_sum = 0.0
         for n in range(m):
-            u = min(max(inputs[n, a], input_min[a]), input_max[a])
+            u = min(max(inputs[n, a], box_lo[n, a]), box_hi[n, a])
             clipped[n, a] = u
             acc = (u + f[n, a]) + gravity[a]
             step_sum += dt * v + half * acc
@@ -149,8 +177,13 @@ def solve_fast(
     dt,
     input_min,
     input_max,
+    plan_min,
+    plan_max,
+    bound_plan,
     state_min,
     state_max,
+    box_lo,
+    box_hi,
     q,
     lo,
     hi,
@@ -161,7 +194,8 @@ def solve_fast(
     positions,
     velocities,
 ):  # pragma: no cover - compiled; tested through ModelPredictiveController
-    """One MPC solve's arithmetic in one call: check the arguments, build q, lo, hi (`condensed_vectors`),
+    """One MPC solve's arithmetic in one call: check the arguments, write each step's input box into box_lo,
+    box_hi (`input_box`), build q, lo, hi (`condensed_vectors`),
     run ExactQp's step 1 (`closed_form_kernel`, qp_data = ExactQp.kernel_data) and, when it is the optimum,
     roll the plan out (`rollout`). Returns (verdict, largest state-bound excursion)."""
     for arr in (position, velocity, target_position, target_velocity):
@@ -177,6 +211,7 @@ def solve_fast(
     for i in range(3):
         x0[i], x0[3 + i] = position[i], velocity[i]
         reference[i], reference[3 + i] = target_position[i], target_velocity[i]
+    input_box(f, input_min, input_max, plan_min, plan_max, bound_plan, box_lo, box_hi)
     condensed_vectors(
         free_x0,
         input_to_state,
@@ -190,6 +225,8 @@ def solve_fast(
         effort,
         input_weight,
         slack_weight,
+        box_lo,
+        box_hi,
         q,
         lo,
         hi,
@@ -205,8 +242,8 @@ def solve_fast(
         f,
         gravity,
         dt,
-        input_min,
-        input_max,
+        box_lo,
+        box_hi,
         state_min,
         state_max,
         inputs,

@@ -19,7 +19,7 @@ import numpy as np
 from controller.formation import FormationController
 from controller.measurement import NoiseParams, sample_detection
 from controller.messages import Detection, PersonEstimate, VehicleState
-from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
+from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams, input_box
 from controller.params import ControllerParams, FormationParams
 from controller.reference import plan_state_at
 from controller.teammates import TeammateTable
@@ -136,6 +136,7 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
     x0, v0 = cp.Parameter(3), cp.Parameter(3)
     p_ref, v_ref = cp.Parameter(3), cp.Parameter(3)
     f = cp.Parameter((m, 3))
+    u_lo, u_hi = cp.Parameter((m, 3)), cp.Parameter((m, 3))  # each step's input box (mpc.input_box)
     rows = max(int(max_rows), 1)
     coeffs = cp.Parameter((rows, 3 * (m + 1)))  # row r's normal at the columns of p(steps[r]), row-major
     offsets = cp.Parameter(rows)
@@ -151,8 +152,8 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
         v[0] == v0,
         p[1:] == p[:-1] + dt * v[:-1] + 0.5 * dt * dt * acc,
         v[1:] == v[:-1] + dt * acc,
-        u >= ones @ np.atleast_2d(params.input_min_mps2),
-        u <= ones @ np.atleast_2d(params.input_max_mps2),
+        u >= u_lo,
+        u <= u_hi,
         p[1:] <= ones @ np.atleast_2d(params.position_max_m) + s_pos,
         p[1:] >= ones @ np.atleast_2d(params.position_min_m) - s_pos,
         v[1:] <= ones @ np.atleast_2d(params.velocity_max_mps) + s_vel,
@@ -176,6 +177,7 @@ def _cvxpy_problem(params: MpcParams, max_rows: int):
         x0.value, v0.value = case["position_m"], case["velocity_mps"]
         p_ref.value, v_ref.value = case["target_position_m"], case["target_velocity_mps"]
         f.value = case["external_inputs_mps2"]
+        u_lo.value, u_hi.value = input_box(case["external_inputs_mps2"], params)
         c, b, sf = np.zeros((rows, 3 * (m + 1))), np.full(rows, -1.0), np.zeros((rows, m))
         planes: HalfPlanes | None = case.get("half_planes")
         if planes is not None:

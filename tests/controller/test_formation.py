@@ -340,6 +340,21 @@ def test_a_resting_teammate_inside_the_gap_does_not_push_a_hold_about():
     assert hold_closing_on(mate, speed_mps=0.0, ticks=20) == pytest.approx(1.2, abs=0.01)
 
 
+@pytest.mark.parametrize(("bounded", "most_mps2"), [(True, 3.0), (False, 5.2)])
+def test_a_plan_backing_off_a_close_teammate_asks_no_more_than_the_input_box(bounded, most_mps2):
+    """At 3.8 m/s towards a teammate resting 2 m ahead, the fields push back hard: the plan's horizontal
+    acceleration stays within the input box's 3 m/s^2 with the fields included; with the paper's bound (u
+    alone) it reaches 5.2 m/s^2, more than the vehicle's 4 (run 413 of the safety sweep, docs/safety.md)."""
+    mpc = ControllerParams().mpc
+    if not bounded:
+        mpc = replace(mpc, plan_acceleration_min_mps2=None, plan_acceleration_max_mps2=None)
+    ctrl = controller(mpc=mpc)
+    here = on_circle(0.0)
+    out = step(ctrl, state(here, (0.0, 3.8, 0.0)), teammates=[hold_plan(here + np.array([0.0, 2.0, 0.0]))])
+    acceleration = np.diff(out.plan.velocities_mps, axis=0) / out.plan.dt_s
+    assert np.max(np.abs(acceleration[:, :2])) == pytest.approx(most_mps2, abs=0.01)
+
+
 # ------------------------------------------------------------------------------------------ bad input
 def test_no_person_brakes_to_rest():
     ctrl = controller()

@@ -3,6 +3,8 @@ docs/method.md#infeasible-qps."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cvxpy as cp
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ from controller.mpc import (
     MpcSolution,
     _plane_violation,
     braking_plan,
+    input_box,
     predict,
 )
 from controller.mpc_kernels import plane_shortfall
@@ -24,6 +27,7 @@ N = PARAMS.horizon_steps
 STEPS = N + 1
 G = np.array([0.0, 0.0, -PARAMS.gravity_mps2])
 HOVER = np.array([0.0, 0.0, PARAMS.gravity_mps2])
+PAPER_BOUND = MpcParams(plan_acceleration_min_mps2=None, plan_acceleration_max_mps2=None)  # u alone bounded
 
 
 def solve(
@@ -61,6 +65,26 @@ def state_space_rollout(x0: np.ndarray, inputs: np.ndarray, external: np.ndarray
 
 
 # ------------------------------------------------------------------------------------------ CVXPY reference
+def reference_input_box(params: MpcParams, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 3) bounds of u under f (M, 3), written out per element: the input box, and with the plan's
+    acceleration bounded also u + f in [a_min, a_max]; where no u meets both, the u nearest the input box
+    whose u + f is in [a_min, a_max]."""
+    lo, hi = np.empty(f.shape), np.empty(f.shape)
+    for n, a in np.ndindex(*f.shape):
+        u_min, u_max = params.input_min_mps2[a], params.input_max_mps2[a]
+        if params.plan_acceleration_min_mps2 is None or params.plan_acceleration_max_mps2 is None:
+            lo[n, a], hi[n, a] = u_min, u_max
+            continue
+        a_min, a_max = params.plan_acceleration_min_mps2[a], params.plan_acceleration_max_mps2[a]
+        if a_max - f[n, a] < u_min:  # the field pushes past what u can hold back: u + f at a_max
+            lo[n, a] = hi[n, a] = a_max - f[n, a]
+        elif a_min - f[n, a] > u_max:
+            lo[n, a] = hi[n, a] = a_min - f[n, a]
+        else:
+            lo[n, a], hi[n, a] = max(u_min, a_min - f[n, a]), min(u_max, a_max - f[n, a])
+    return lo, hi
+
+
 def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The MPC's QP written from the equations, states as variables; returns (u, positions, velocities)."""
     dt, m = params.dt_s, params.horizon_steps + 1
@@ -73,13 +97,14 @@ def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarr
     ones = np.ones((m, 1))
     s_pos = ones @ cp.reshape(s[:3], (1, 3), order="C")
     s_vel = ones @ cp.reshape(s[3:], (1, 3), order="C")
+    u_lo, u_hi = reference_input_box(params, f)
     constraints = [
         p[0] == case["position_m"],
         v[0] == case["velocity_mps"],
         p[1:] == p[:-1] + dt * v[:-1] + 0.5 * dt * dt * acc,
         v[1:] == v[:-1] + dt * acc,
-        u >= ones @ np.atleast_2d(params.input_min_mps2),
-        u <= ones @ np.atleast_2d(params.input_max_mps2),
+        u >= u_lo,
+        u <= u_hi,
         p[1:] <= ones @ np.atleast_2d(params.position_max_m) + s_pos,
         p[1:] >= ones @ np.atleast_2d(params.position_min_m) - s_pos,
         v[1:] <= ones @ np.atleast_2d(params.velocity_max_mps) + s_vel,
@@ -302,10 +327,11 @@ def test_hover_effort_lets_a_force_move_the_plan():
 
 # ------------------------------------------------------------------------------------------- robustness
 def test_persistent_huge_force_gives_bounded_slack():
-    """f = 20 m/s^2 east over the whole horizon: braking at -3 leaves 17 m/s^2, so after 1.6 s the velocity
-    is 1 + 1.6 * 17 = 28.2 m/s, 23.2 m/s over the bound; the plan must be exactly that, not garbage."""
+    """The paper's bound (u alone), f = 20 m/s^2 east over the whole horizon: braking at -3 leaves 17 m/s^2,
+    so after 1.6 s the velocity is 1 + 1.6 * 17 = 28.2 m/s, 23.2 m/s over the bound; the plan must be exactly
+    that, not garbage."""
     sol = solve(
-        ModelPredictiveController(PARAMS),
+        ModelPredictiveController(PAPER_BOUND),
         velocity_mps=np.array([1.0, 0.0, 0.0]),
         target_position_m=np.array([5.0, 3.0, 8.0]),
         external_inputs_mps2=np.tile([20.0, 0.0, 0.0], (STEPS, 1)),
@@ -314,6 +340,64 @@ def test_persistent_huge_force_gives_bounded_slack():
     assert sol.max_state_violation == pytest.approx(23.2, abs=1e-3)
     np.testing.assert_allclose(sol.inputs_mps2[:, 0], -3.0, atol=1e-4)
     assert np.all(np.isfinite(sol.positions_m)) and np.max(np.abs(sol.positions_m)) < 30.0
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_a_plan_never_accelerates_faster_than_the_input_box_allows(solver):
+    """f = 20 m/s^2 east, far beyond the box's 6 m/s^2 width: with the plan's acceleration bounded, u + f is
+    held at the box's 3 m/s^2, so after 1.6 s the velocity is 1 + 1.6 * 3 = 5.8 m/s (0.8 over its bound)."""
+    sol = solve(
+        ModelPredictiveController(MpcParams(solver=solver)),
+        velocity_mps=np.array([1.0, 0.0, 0.0]),
+        target_position_m=np.array([5.0, 3.0, 8.0]),
+        external_inputs_mps2=np.tile([20.0, 0.0, 0.0], (STEPS, 1)),
+    )
+    assert sol.ok
+    np.testing.assert_allclose(sol.inputs_mps2[:, 0] + 20.0, 3.0, atol=1e-6)
+    assert sol.max_state_violation == pytest.approx(0.8, abs=1e-3)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize(("bounded", "first_u"), [(True, 1.0), (False, 3.0)])
+def test_a_field_along_the_way_leaves_the_input_only_the_rest_of_the_box(solver, bounded, first_u):
+    """f = 2 m/s^2 east and a target 15 m east: the plan accelerates east as hard as it may. Bounded, u + f
+    stays in the box, so u = 3 - 2 = 1 m/s^2; as in the paper (u alone bounded), u = 3 and the plan
+    accelerates at 5 m/s^2, more than a vehicle flies."""
+    sol = solve(
+        ModelPredictiveController(replace(PARAMS if bounded else PAPER_BOUND, solver=solver)),
+        target_position_m=np.array([15.0, 0.0, 6.0]),
+        external_inputs_mps2=np.tile([2.0, 0.0, 0.0], (STEPS, 1)),
+    )
+    assert sol.ok
+    assert sol.inputs_mps2[0, 0] == pytest.approx(first_u, abs=1e-6)
+
+
+def test_input_box_holds_the_plans_acceleration_within_its_bounds():
+    """Per step and axis: the input box, narrowed so that u + f stays in [a_min, a_max]; a field beyond the
+    boxes' reach pins u where u + f is at the bound it pushes against; z's box is [3, 11] before gravity."""
+    f = np.array([[0.0, 2.0, 0.0], [-1.0, 7.0, -9.0], [-20.0, 0.5, 1.0]])
+    lo, hi = input_box(f, PARAMS)
+    np.testing.assert_allclose(lo, [[-3.0, -3.0, 3.0], [-2.0, -4.0, 12.0], [17.0, -3.0, 3.0]])
+    np.testing.assert_allclose(hi, [[3.0, 1.0, 11.0], [3.0, -4.0, 12.0], [17.0, 2.5, 10.0]])
+
+
+def test_input_box_without_a_plan_bound_is_the_papers():
+    lo, hi = input_box(np.full((2, 3), 50.0), PAPER_BOUND)
+    np.testing.assert_allclose(lo, [[-3.0, -3.0, 3.0]] * 2)
+    np.testing.assert_allclose(hi, [[3.0, 3.0, 11.0]] * 2)
+
+
+@pytest.mark.parametrize(
+    "bounds",
+    [
+        dict(plan_acceleration_min_mps2=None),
+        dict(plan_acceleration_min_mps2=(1.0, 0.0, 0.0), plan_acceleration_max_mps2=(0.0, 0.0, 0.0)),
+        dict(plan_acceleration_max_mps2=(np.inf, 3.0, 11.0)),
+    ],
+)
+def test_plan_acceleration_bounds_must_be_both_finite_and_ordered(bounds):
+    with pytest.raises(ValueError, match="plan acceleration|both or neither"):
+        MpcParams(**bounds)
 
 
 @pytest.mark.parametrize(

@@ -3,8 +3,9 @@
 
 The case is the first 20 s of run 181 of the safety sweep: 16 MAVs spreading out from a clustered start, 20
 random trees, every message delivered, the person on the paper's path. Without the estimate, two MAVs that
-believed themselves 2.04 m apart or more came within 0.70 m of each other at 14.3 s: their GPS fixes had
-drifted apart by more than a metre.
+believed themselves 2.08 m apart or more came within 0.75 m of each other at 14.6 s: their GPS fixes had
+drifted apart by more than a metre (0.70 m at 14.3 s before the plans' acceleration was bounded by the input
+box, docs/safety.md#plans-the-vehicle-can-fly-2026-12-01).
 """
 
 from functools import cache
@@ -28,7 +29,7 @@ def _run_181(gps_offset: bool) -> dict:
         comm_loss=run.comm_loss,
         start=run.start,
         rate_hz=run.rate_hz,
-        duration_s=20.0,  # the closest pair came at 14.3 s
+        duration_s=20.0,  # the closest pair came at 14.6 s
         warmup_s=15.0,  # below the duration; the safety minima count from take-off regardless
         gps_offset=gps_offset,
     )
@@ -41,10 +42,10 @@ def run_181():
     return _run_181
 
 
-def test_without_the_estimate_two_mavs_that_kept_their_rows_came_within_0_7_m(run_181):
+def test_without_the_estimate_two_mavs_that_kept_their_rows_came_within_0_75_m(run_181):
     metrics = run_181(False)
     assert metrics["min_believed_separation_m"] >= 2.0
-    assert metrics["min_separation_m"] == pytest.approx(0.70, abs=0.02)
+    assert metrics["min_separation_m"] == pytest.approx(0.75, abs=0.02)
 
 
 def test_with_the_estimate_the_same_flight_keeps_them_2_m_apart(run_181):
