@@ -483,6 +483,7 @@ class FormationController:
             own_id=self._id,
             params=prm.separation,
             lag_m=lag,
+            floor_m=self._mpc_params.position_min_m[2],
         )
 
     def _hold_rows(self, tick: _Tick, rows: SeparationRows) -> SeparationRows:

@@ -22,6 +22,12 @@ The paper's repulsive fields (eqs. 13, 15) shape the plan but promise nothing. T
   position is below the trunk's top; the disc lies wholly behind the plane, so keeping to the plane keeps
   clear of the disc. The plane is moved out by how far the vehicle lags its plan towards the trunk
   (`lag_m`): the row is for the vehicle.
+- **The arena's floor.** At every step our previous plan is within reach of the floor (MpcParams'
+  position_min_m's z), a row keeps the plan at or above the floor, or above the previous plan where that
+  is lower, weighted 20 times a teammate row. Without it, rows that cannot all hold (a silent teammate
+  above, whose gap grows with its age) drove an escaping plan down through the soft state bounds, whose
+  penalty is ten times smaller than the rows', to below the ground (`floor_rows`). It never pushes a plan
+  up.
 
 All rows are soft with one exact penalty (controller/mpc.py `HalfPlanes`): the QP is never infeasible, and
 whenever the rows can all hold the plan holds them exactly. When they cannot (squeezed between trunks, a
@@ -71,6 +77,8 @@ class SeparationParams:
         rows of a plan step share the QP's slack for that step, their largest weighted violation, so when
         rows cannot all hold the plan gives way to a teammate (who also moves away) before a trunk (which
         does not).
+    floor_row_weight: the same for the arena floor's rows (`floor_rows`): a plan sinks below the floor by
+        a twentieth of what it gives way to its teammates' rows.
     """
 
     enabled: bool = True
@@ -86,6 +94,7 @@ class SeparationParams:
     escape_steps: int = 5
     escape_climb_m: float = 2.0
     obstacle_row_weight: float = 5.0
+    floor_row_weight: float = 20.0
     plan_deviation_mps2: float = 8.0
 
     def __post_init__(self) -> None:
@@ -94,8 +103,8 @@ class SeparationParams:
                 continue
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"SeparationParams.{name} must be a finite number >= 0, got {value}")
-        if self.obstacle_row_weight <= 0.0:
-            raise ValueError("SeparationParams.obstacle_row_weight must be > 0")
+        if self.obstacle_row_weight <= 0.0 or self.floor_row_weight <= 0.0:
+            raise ValueError("SeparationParams: the row weights must be > 0")
         if self.step_brake_mps2 <= 0.0 or self.brake_mps2 <= 0.0:
             raise ValueError("SeparationParams: the braking decelerations must be > 0")
 
@@ -118,9 +127,10 @@ def imminent_miss_m(planes: HalfPlanes, positions_m: np.ndarray, *, steps: int) 
 class SeparationRows:
     """The rows of one tick and where they came from.
 
-    planes: the MPC's half-planes (R rows); teammate_rows, obstacle_rows: how many of each;
-    closest_teammate_m: the smallest distance between our previous plan and a teammate's plan over the
-    horizon (inf when none); closest_teammate_index: that teammate's index in the TeammatePaths (-1: none).
+    planes: the MPC's half-planes (R rows: the teammate rows, then the trunk rows, then the floor rows);
+    teammate_rows, obstacle_rows, floor_rows: how many of each; closest_teammate_m: the smallest distance
+    between our previous plan and a teammate's plan over the horizon (inf when none);
+    closest_teammate_index: that teammate's index in the TeammatePaths (-1: none).
     """
 
     planes: HalfPlanes
@@ -128,10 +138,11 @@ class SeparationRows:
     obstacle_rows: int
     closest_teammate_m: float
     closest_teammate_index: int
+    floor_rows: int = 0
 
     @property
     def count(self) -> int:
-        return self.teammate_rows + self.obstacle_rows
+        return self.teammate_rows + self.obstacle_rows + self.floor_rows
 
 
 def held_rows(
@@ -142,7 +153,7 @@ def held_rows(
     Braking at decel_mps2 against the start velocity (3,) m/s runs straight from start_m (3,) to the stop
     point, so the path's least reach along a row's normal is at one of the two. A teammate row that this path
     would break is moved back to that reach: a holding MAV closes on a teammate no further than braking
-    must, and a neighbour's gap never pushes a resting MAV about. Trunk rows stay as they are."""
+    must, and a neighbour's gap never pushes a resting MAV about. Trunk and floor rows stay as they are."""
     t = rows.teammate_rows
     if t == 0:
         return rows
@@ -258,6 +269,23 @@ def obstacle_rows(
     return s, w * normals, w * offsets[m, s]
 
 
+def floor_rows(
+    *, own_path_m: np.ndarray, floor_m: float, params: SeparationParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows z(n) >= min(floor_m, q_z(n)) at the steps 1..S-1 where our previous plan q (S, 3) is within
+    row_reach_m of the floor, scaled by floor_row_weight: when rows cannot all hold, the plan gives way to a
+    teammate long before it sinks below the floor, and the row never asks a plan below the floor (the climb
+    after take-off) to rise. Returns steps (R,), normals (R, 3), offsets (R,)."""
+    heights = np.asarray(own_path_m, dtype=float)[:, 2]
+    near = heights - floor_m < params.row_reach_m
+    near[0] = False
+    steps = np.flatnonzero(near)
+    w = params.floor_row_weight
+    normals = np.zeros((steps.shape[0], 3))
+    normals[:, 2] = w
+    return steps, normals, w * np.minimum(floor_m, heights[steps])
+
+
 def separation_rows(
     *,
     own_path_m: np.ndarray,
@@ -271,6 +299,7 @@ def separation_rows(
     own_id: int,
     params: SeparationParams,
     lag_m: np.ndarray | None = None,
+    floor_m: float | None = None,
     compiled: bool = True,
 ) -> SeparationRows:
     """Every separation row of one tick (see the module docstring), as the MPC's soft `HalfPlanes`.
@@ -280,6 +309,7 @@ def separation_rows(
     The rows constrain plan step n = 1..S-1 (the MPC's x(n); x(0) is the start state). lag_m (3,): where
     the vehicle is less where its plan starts (the follower lags the plan, up to the leash); every trunk row
     is tightened by the lag's part towards its plane, so it holds for the vehicle rather than for the plan.
+    floor_m: the arena's floor (m), kept by `floor_rows`; None: no floor rows.
     compiled: build them with separation_kernel.py's kernels (the default) or with the numpy reference here.
     """
     cooperative = mates.in_formation & (mate_ages_s <= params.cooperative_age_s)
@@ -304,15 +334,21 @@ def separation_rows(
         closest_index, closest = -1, math.inf
     if lag_m is not None:
         o_offsets = o_offsets + np.maximum(-(o_normals @ np.asarray(lag_m, dtype=float)), 0.0)
-    normals = np.concatenate([t_normals, o_normals])
-    offsets = np.concatenate([t_offsets, o_offsets])
+    f_steps, f_normals, f_offsets = (
+        floor_rows(own_path_m=own_path_m, floor_m=floor_m, params=params)
+        if floor_m is not None
+        else (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
+    )
+    normals = np.concatenate([t_normals, o_normals, f_normals])
+    offsets = np.concatenate([t_offsets, o_offsets, f_offsets])
     planes = HalfPlanes(
-        steps=np.concatenate([t_steps, o_steps]).astype(np.int64),
+        steps=np.concatenate([t_steps, o_steps, f_steps]).astype(np.int64),
         normals_xy=normals[:, :2],
         normals_z=normals[:, 2],
         offsets=offsets,
     )
-    return SeparationRows(planes, int(t_steps.shape[0]), int(o_steps.shape[0]), closest, closest_index)
+    counts = int(t_steps.shape[0]), int(o_steps.shape[0])
+    return SeparationRows(planes, *counts, closest, closest_index, floor_rows=int(f_steps.shape[0]))
 
 
 def _reference_rows(

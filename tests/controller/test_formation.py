@@ -355,6 +355,24 @@ def test_a_plan_backing_off_a_close_teammate_asks_no_more_than_the_input_box(bou
     assert np.max(np.abs(acceleration[:, :2])) == pytest.approx(most_mps2, abs=0.01)
 
 
+def test_an_escape_from_a_silent_teammate_above_does_not_sink_below_the_floor():
+    """A teammate 0.8 m aside and 1.2 m above, its plan 0.6 s old: its gap has grown past what any plan
+    can keep (the rows are missed by 2.6 m), and its row's normal points down. The escape's plan gives way
+    to it, but not through the arena's 3 m floor: its lowest step is at 3.0 m (without the floor rows the
+    rows drove such plans through the soft height bound to below the ground: run 277 of the safety sweep,
+    docs/safety.md)."""
+    ctrl = controller()
+    here = np.array([0.0, -8.0, 4.0])
+    out = step(ctrl, state(here))
+    for tick in range(1, 8):
+        now = 0.1 * tick
+        mate = hold_plan(here + np.array([0.8, 0.0, 1.2]), stamp_s=now - 0.6)
+        own = state(out.plan.positions_m[1], out.plan.velocities_mps[1]) if tick > 1 else state(here)
+        out = step(ctrl, own, now_s=now, teammates=[mate])
+        assert out.status == SolveStatus.ESCAPE
+        assert out.plan.positions_m[:, 2].min() == pytest.approx(3.0, abs=1e-3)
+
+
 # ------------------------------------------------------------------------------------------ bad input
 def test_no_person_brakes_to_rest():
     ctrl = controller()

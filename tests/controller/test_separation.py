@@ -15,6 +15,7 @@ from controller.separation import (
     SeparationParams,
     SeparationRows,
     braking_room_m,
+    floor_rows,
     held_rows,
     obstacle_rows,
     row_margins,
@@ -270,21 +271,22 @@ def on_circle(bearings_deg) -> np.ndarray:
 
 
 def swap_run(params: ControllerParams):
-    """Two MAVs 40 degrees apart on the circle (5.5 m) told to take each other's bearing: they meet
-    head-on."""
+    """Two MAVs 90 degrees apart on the circle (11.3 m) told to take each other's bearing: they meet
+    head-on. (40 degrees apart, the fields alone kept 1.86 m once the vehicles fly the plan's acceleration
+    forward, as the agents send it: too easy to show what the rows are for.)"""
     return simulate(
         team_size=2,
         duration_s=20.0,
         person=still_person,
-        start_m=on_circle([70.0, 110.0]),
-        bearings_rad=np.radians([110.0, 70.0]),
+        start_m=on_circle([45.0, 135.0]),
+        bearings_rad=np.radians([135.0, 45.0]),
         params=params,
     )
 
 
 @pytest.mark.slow
 def test_two_mavs_swapping_slots_head_on_keep_1_5_m():
-    """Measured 2.03 m (0.59 m without the rows, next test)."""
+    """Measured 2.54 m (0.59 m without the rows, next test)."""
     run = swap_run(ControllerParams())
     assert min_separation_m(run, horizontal=False) >= 1.5
 
@@ -369,8 +371,8 @@ def test_a_teammate_whose_plans_arrive_1_s_late_is_still_kept_1_5_m_away():
         team_size=2,
         duration_s=20.0,
         person=still_person,
-        start_m=on_circle([70.0, 110.0]),
-        bearings_rad=np.radians([110.0, 70.0]),
+        start_m=on_circle([45.0, 135.0]),
+        bearings_rad=np.radians([135.0, 45.0]),
         plan_delay_s=[0.0, 1.0],
     )
     assert min_separation_m(run, horizontal=False) >= 1.5
@@ -412,3 +414,42 @@ def test_only_rows_within_reach_of_binding_are_built():
     kept = rows.planes.steps
     assert 0 < kept.size < STEPS - 1 and kept.max() == STEPS - 1
     assert np.all(np.diff(kept) == 1)  # a contiguous run of the last steps
+
+
+# ---------------------------------------------------------------------------------------------- the floor
+def test_floor_rows_keep_a_descending_plan_above_the_floor_where_it_is_within_reach():
+    """A plan sinking from 8 m at 2 m/s: the steps within row_reach_m (4 m) of the 3 m floor get a row
+    z >= 3 m, scaled by floor_row_weight; the higher steps none."""
+    path = line([0.0, 0.0, 8.0], [0.0, 0.0, -2.0])  # z = 8.0, 7.8, ... 5.0
+    steps, normals, offsets = floor_rows(own_path_m=path, floor_m=3.0, params=PARAMS)
+    np.testing.assert_array_equal(steps, np.flatnonzero(path[:, 2] < 7.0))
+    w = PARAMS.floor_row_weight
+    np.testing.assert_allclose(normals, np.tile([0.0, 0.0, w], (len(steps), 1)))
+    np.testing.assert_allclose(offsets, 3.0 * w)
+
+
+def test_floor_rows_never_ask_a_plan_below_the_floor_to_rise():
+    """After take-off a plan may start below the floor: its rows ask no more than where it already is."""
+    path = line([0.0, 0.0, 1.0], [0.0, 0.0, 0.5])  # z = 1.0 .. 1.75
+    steps, _, offsets = floor_rows(own_path_m=path, floor_m=3.0, params=PARAMS)
+    np.testing.assert_array_equal(steps, np.arange(1, STEPS))
+    np.testing.assert_allclose(offsets / PARAMS.floor_row_weight, path[1:, 2])
+
+
+def test_separation_rows_append_the_floor_rows_after_the_trunk_rows():
+    path = line([0.0, 0.0, 5.0], [0.0, 0.0, 0.0])
+    rows = separation_rows(
+        own_path_m=path,
+        own_velocities_mps=np.zeros((STEPS, 3)),
+        mates=mates(np.zeros((0, STEPS, 3))),
+        mate_ages_s=np.zeros(0),
+        inflation_m=np.zeros(0),
+        obstacles=ObstacleSet.from_obstacles(()),
+        own_cov_radius_m=0.0,
+        dt_s=DT,
+        own_id=0,
+        params=PARAMS,
+        floor_m=3.0,
+    )
+    assert (rows.teammate_rows, rows.obstacle_rows, rows.floor_rows, rows.count) == (0, 0, 15, 15)
+    np.testing.assert_allclose(row_margins(rows.planes, path), 2.0 * PARAMS.floor_row_weight)
