@@ -132,6 +132,40 @@ def test_generic_problems_take_every_path(generic_results):
     assert {paths.count(p) >= 5 for p in ("closed_form", "blocks", "active_set")} == {True}
 
 
+def _with_extra(a, lo, hi, extra):
+    extra_a, extra_lo, extra_hi = extra
+    return np.vstack([a, extra_a]), np.concatenate([lo, extra_lo]), np.concatenate([hi, extra_hi])
+
+
+def test_rows_reaching_two_blocks_leave_the_third_at_its_own_optimum():
+    """Coupling rows on half of block 1's variables and all of block 0's: the active-set rounds solve those
+    two blocks whole (P couples the rest of block 1 to what the rows reach) and keep block 2's own
+    solution, which is still the whole problem's minimiser."""
+    worst, active = 0.0, 0
+    for seed in range(30):
+        p, q, a, lo, hi, resting, extra = soft_block_problem(np.random.default_rng(seed), coupled=True)
+        assert extra is not None
+        extra_a = extra[0].copy()
+        extra_a[:, 9:18] = 0.0
+        result = ExactQp(p, a, resting).solve(q, lo, hi, extra_a, extra[1], extra[2])
+        reference = cvxpy_qp_reference(p, q, *_with_extra(a, lo, hi, (extra_a, extra[1], extra[2])))
+        worst = max(worst, float(np.max(np.abs(result.x - reference))))
+        active += result.path == "active_set"
+    assert worst < TOL
+    assert active >= 20
+
+
+def test_resting_variables_without_quadratic_cost_still_solve_exactly():
+    """Slacks with a linear penalty only (P singular there): the active set works on P itself instead of
+    its Cholesky factor, with the same minimiser."""
+    p, q, a, lo, hi, resting, extra = soft_block_problem(np.random.default_rng(3), coupled=True)
+    assert extra is not None
+    p[18:, 18:] = 0.0
+    result = ExactQp(p, a, resting).solve(q, lo, hi, *extra)
+    assert result.ok and result.path == "active_set"
+    np.testing.assert_allclose(result.x, cvxpy_qp_reference(p, q, *_with_extra(a, lo, hi, extra)), atol=TOL)
+
+
 def test_closed_form_is_the_unconstrained_minimiser_when_nothing_binds():
     p, q, a, lo, hi, resting, _ = soft_block_problem(np.random.default_rng(1), coupled=False)
     q[:18] = 0.01
