@@ -260,7 +260,7 @@ class FormationController:
 
         positions, velocities = sol.positions_m, sol.velocities_mps
         if price:
-            felt = self._teammates((), now_s, own) if hold else mates  # a hold feels no teammate's field
+            felt = self._teammates((), now_s, own) if hold and not climbing else mates  # a hold feels none
             field = price_field(
                 own_position_m=start_p,
                 goal_position_m=target,

@@ -177,6 +177,11 @@ class HalfPlanes:
     soft: np.ndarray | None = None
     normals_z: np.ndarray | None = None
 
+    @property
+    def z_normals(self) -> np.ndarray:
+        """(R,) normals_z, zeros where it is None (vertical planes)."""
+        return np.zeros(len(self.steps)) if self.normals_z is None else np.asarray(self.normals_z, float)
+
 
 # The checked half-planes: steps (R,) int64, normals (R, 3), offsets (R,) m, soft (R,) 1.0 / 0.0.
 Planes = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
@@ -550,9 +555,7 @@ class ModelPredictiveController:
         normals = np.asarray(half_planes.normals_xy, dtype=float)
         offsets = np.asarray(half_planes.offsets, dtype=float)
         soft = np.ones(count, dtype=bool) if half_planes.soft is None else np.asarray(half_planes.soft)
-        normals_z = (
-            np.zeros(count) if half_planes.normals_z is None else np.asarray(half_planes.normals_z, float)
-        )
+        normals_z = half_planes.z_normals
         if (
             steps.ndim != 1
             or normals.shape != (count, 2)
@@ -906,7 +909,8 @@ class ModelPredictiveController:
             return self._failure(status, message, iterations, run_time)
 
         # The plan returned is the exact rollout of the box-clipped inputs: it obeys the dynamics exactly.
-        inputs = np.clip(result.x[: self._nu].reshape(n, 3), *input_box(f, prm))
+        box = (lo[: self._nu].reshape(n, 3), hi[: self._nu].reshape(n, 3))  # input_box, as _solve_vectors set
+        inputs = np.clip(result.x[: self._nu].reshape(n, 3), *box)
         positions, velocities = predict(
             position_m=arrays["position_m"],
             velocity_mps=arrays["velocity_mps"],

@@ -112,7 +112,7 @@ class SeparationParams:
 def row_margins(planes: HalfPlanes, positions_m: np.ndarray) -> np.ndarray:
     """(R,) a . p(step) - b of every row for plan positions (N+2, 3): >= 0 where the row holds."""
     p = positions_m[planes.steps]
-    return np.einsum("ri,ri->r", planes.normals_xy, p[:, :2]) + _normals_z(planes) * p[:, 2] - planes.offsets
+    return np.einsum("ri,ri->r", planes.normals_xy, p[:, :2]) + planes.z_normals * p[:, 2] - planes.offsets
 
 
 def imminent_miss_m(planes: HalfPlanes, positions_m: np.ndarray, *, steps: int) -> float:
@@ -161,15 +161,10 @@ def held_rows(
     v = np.asarray(velocity_mps, dtype=float)
     stop = start + v * (np.linalg.norm(v) / (2.0 * decel_mps2))
     planes = rows.planes
-    normals = np.column_stack([planes.normals_xy[:t], _normals_z(planes)[:t]])
+    normals = np.column_stack([planes.normals_xy[:t], planes.z_normals[:t]])
     offsets = planes.offsets.copy()
     offsets[:t] = np.minimum(offsets[:t], np.minimum(normals @ start, normals @ stop))
     return replace(rows, planes=replace(planes, offsets=offsets))
-
-
-def _normals_z(planes: HalfPlanes) -> np.ndarray:
-    """(R,) the rows' z normals (None in HalfPlanes means vertical planes: zeros)."""
-    return np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
 
 
 def age_margin_m(ages_s: np.ndarray, *, speed_term_m: np.ndarray, params: SeparationParams) -> np.ndarray:
@@ -334,9 +329,10 @@ def separation_rows(
         closest_index, closest = -1, math.inf
     if lag_m is not None:
         o_offsets = o_offsets + np.maximum(-(o_normals @ np.asarray(lag_m, dtype=float)), 0.0)
+    near_floor = floor_m is not None and own_path_m[1:, 2].min() - floor_m < params.row_reach_m
     f_steps, f_normals, f_offsets = (
         floor_rows(own_path_m=own_path_m, floor_m=floor_m, params=params)
-        if floor_m is not None
+        if near_floor and floor_m is not None
         else (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
     )
     normals = np.concatenate([t_normals, o_normals, f_normals])
