@@ -11,6 +11,7 @@ import pytest
 
 from controller.mpc import (
     SOLVERS,
+    HalfPlanes,
     ModelPredictiveController,
     MpcParams,
     MpcSolution,
@@ -85,15 +86,16 @@ def reference_input_box(params: MpcParams, f: np.ndarray) -> tuple[np.ndarray, n
     return lo, hi
 
 
-def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The MPC's QP written from the equations, states as variables; returns (u, positions, velocities)."""
+def cvxpy_mpc_problem(
+    params: MpcParams, case: dict, planes: HalfPlanes | None = None
+) -> tuple[cp.Problem, cp.Variable, cp.Variable, cp.Variable]:
+    """The MPC's QP written from the equations, states as variables, with the soft half-planes if given (the
+    slack w(n) shared by the rows of plan step n); returns (problem, u, positions, velocities) to solve."""
     dt, m = params.dt_s, params.horizon_steps + 1
+    g = params.gravity_vector_mps2
     f = case["external_inputs_mps2"]
-    u = cp.Variable((m, 3))
-    p = cp.Variable((m + 1, 3))
-    v = cp.Variable((m + 1, 3))
-    s = cp.Variable(6)
-    acc = u + f + G
+    u, p, v, s = cp.Variable((m, 3)), cp.Variable((m + 1, 3)), cp.Variable((m + 1, 3)), cp.Variable(6)
+    acc = u + f + g
     ones = np.ones((m, 1))
     s_pos = ones @ cp.reshape(s[:3], (1, 3), order="C")
     s_vel = ones @ cp.reshape(s[3:], (1, 3), order="C")
@@ -111,7 +113,7 @@ def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarr
         v[1:] >= ones @ np.atleast_2d(params.velocity_min_mps) - s_vel,
         s >= 0,
     ]
-    offset = {"hover": np.tile(G, (m, 1)), "planned": f + G, "raw": np.zeros((m, 3))}[params.effort]
+    offset = {"hover": np.tile(g, (m, 1)), "planned": f + g, "raw": np.zeros((m, 3))}[params.effort]
     cost = (
         params.input_weight * cp.sum_squares(u + offset)
         + cp.quad_form(p[m] - case["target_position_m"], case["terminal_position_weight"])
@@ -119,7 +121,20 @@ def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarr
         + params.slack_weight * cp.sum(s)
         + params.slack_quadratic_weight * cp.sum_squares(s)
     )
-    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if planes is not None:
+        steps = sorted({int(n) for n in planes.steps})
+        w = cp.Variable(len(steps))
+        constraints += [w >= 0]
+        rows = zip(planes.steps, planes.normals_xy, planes.z_normals, planes.offsets, strict=True)
+        for n, a, a_z, b in rows:
+            constraints.append(a @ p[int(n), :2] + a_z * p[int(n), 2] + w[steps.index(int(n))] >= b)
+        cost += params.half_plane_weight * cp.sum(w) + params.half_plane_quadratic_weight * cp.sum_squares(w)
+    return cp.Problem(cp.Minimize(cost), constraints), u, p, v
+
+
+def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`cvxpy_mpc_problem` solved by Clarabel at 1e-10; returns (u, positions, velocities)."""
+    problem, u, p, v = cvxpy_mpc_problem(params, case)
     problem.solve(
         solver=cp.CLARABEL,
         canon_backend=cp.SCIPY_CANON_BACKEND,

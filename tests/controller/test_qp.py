@@ -9,7 +9,7 @@ import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
-from test_mpc import KINDS, random_case, reference_input_box
+from test_mpc import KINDS, cvxpy_mpc_problem, random_case
 
 from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
 from controller.qp import ExactQp
@@ -213,43 +213,7 @@ def cvxpy_mpc_reference(
     active-set QP solver, exact at the vertex. (Clarabel, an interior-point method, stops 1e-5..4e-4 away from
     it on these degenerate instances, inputs at their bounds, whatever its tolerances; OSQP at 1e-11 with
     polishing ends "inaccurate" on some instances with one half-plane slack per plan step.)"""
-    dt, m = params.dt_s, params.horizon_steps + 1
-    g = np.array([0.0, 0.0, -params.gravity_mps2])
-    f = case["external_inputs_mps2"]
-    u, p, v, s = cp.Variable((m, 3)), cp.Variable((m + 1, 3)), cp.Variable((m + 1, 3)), cp.Variable(6)
-    ones = np.ones((m, 1))
-    acc = u + f + g
-    s_pos = ones @ cp.reshape(s[:3], (1, 3), order="C")
-    s_vel = ones @ cp.reshape(s[3:], (1, 3), order="C")
-    constraints = [
-        p[0] == case["position_m"],
-        v[0] == case["velocity_mps"],
-        p[1:] == p[:-1] + dt * v[:-1] + 0.5 * dt * dt * acc,
-        v[1:] == v[:-1] + dt * acc,
-        u >= reference_input_box(params, f)[0],
-        u <= reference_input_box(params, f)[1],
-        p[1:] <= ones @ np.atleast_2d(params.position_max_m) + s_pos,
-        p[1:] >= ones @ np.atleast_2d(params.position_min_m) - s_pos,
-        v[1:] <= ones @ np.atleast_2d(params.velocity_max_mps) + s_vel,
-        v[1:] >= ones @ np.atleast_2d(params.velocity_min_mps) - s_vel,
-        s >= 0,
-    ]
-    cost = (
-        params.input_weight * cp.sum_squares(u + np.tile(g, (m, 1)))
-        + cp.quad_form(p[m] - case["target_position_m"], case["terminal_position_weight"])
-        + cp.quad_form(v[m] - case["target_velocity_mps"], case["terminal_velocity_weight"])
-        + params.slack_weight * cp.sum(s)
-        + params.slack_quadratic_weight * cp.sum_squares(s)
-    )
-    if planes is not None:  # the soft half-planes, with the slack w(n) shared by those of plan step n
-        steps = sorted({int(n) for n in planes.steps})
-        w = cp.Variable(len(steps))
-        constraints += [w >= 0]
-        normals_z = np.zeros(len(planes.steps)) if planes.normals_z is None else planes.normals_z
-        for n, a, a_z, b in zip(planes.steps, planes.normals_xy, normals_z, planes.offsets, strict=True):
-            constraints.append(a @ p[int(n), :2] + a_z * p[int(n), 2] + w[steps.index(int(n))] >= b)
-        cost += params.half_plane_weight * cp.sum(w) + params.half_plane_quadratic_weight * cp.sum_squares(w)
-    problem = cp.Problem(cp.Minimize(cost), constraints)
+    problem, u, p, v = cvxpy_mpc_problem(params, case, planes)
     try:
         problem.solve(solver=cp.HIGHS, canon_backend=cp.SCIPY_CANON_BACKEND)
     except cp.SolverError:  # HiGHS's QP solver ends in "Solve error" on a few instances (2 of the 200 here,
