@@ -78,7 +78,11 @@ class AgentParams:
     heard within this long: the age up to which the separation rows trust a teammate to hold its own
     (SeparationParams.cooperative_age_s); gps_offset: estimate this MAV's GPS offset relative to the team
     from its detections, publish it with the plans, and place the teammates by it in the separation rows
-    (controller/gps_offset.py; None: take the teammates' plans as their GPS puts them)."""
+    (controller/gps_offset.py; None: take the teammates' plans as their GPS puts them);
+    phantom_clearance_m: a roster slot closer than this to the MAV gets no phantom. The MAV is then inside
+    the gap the phantom's separation rows keep (1.6 m and more), so the rows cannot hold and would send it on
+    an escape at full authority away from a place where no vehicle is, into whoever is on the other side
+    (sweep run 434, docs/safety.md); it leaves the slot by steering to its own, among real teammates' rows."""
 
     plan_period_s: float = 0.1
     teammate_timeout_s: float = 3.0
@@ -87,6 +91,7 @@ class AgentParams:
     blind_after_s: float = 1.5
     resume_within_s: float = 0.5
     gps_offset: GpsOffsetParams | None = field(default_factory=GpsOffsetParams)
+    phantom_clearance_m: float = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -340,7 +345,8 @@ class Agent:
         used_slot = slot is not None and known < len(inputs.roster) - 1 and not hold
         phantoms: tuple[HorizonPlan, ...] = ()
         if used_slot and person is not None:
-            phantoms = self._phantoms(now_s, person, inputs, self._teammates.fresh_ids(since_s))
+            heard = self._teammates.fresh_ids(since_s)
+            phantoms = self._phantoms(now_s, person, inputs, heard, np.asarray(own.position_m, dtype=float))
         if used_slot:
             counts["slot_ticks"] += 1
         try:
@@ -442,10 +448,16 @@ class Agent:
         )
 
     def _phantoms(
-        self, now_s: float, person: PersonEstimate, inputs: AgentInputs, heard_ids: set[int]
+        self,
+        now_s: float,
+        person: PersonEstimate,
+        inputs: AgentInputs,
+        heard_ids: set[int],
+        own_position_m: np.ndarray,
     ) -> tuple[HorizonPlan, ...]:
         """Plans at the roster slots of the in-formation teammates not heard from (heard_ids: the fresh
-        in-formation plans' vehicle ids), moving with the person."""
+        in-formation plans' vehicle ids), moving with the person; none at a slot within phantom_clearance_m
+        of own_position_m (3,)."""
         n = self._params.mpc.horizon_steps + 2
         dt = self._params.mpc.dt_s
         velocity = np.array([person.velocity_mps[0], person.velocity_mps[1], 0.0])
@@ -457,6 +469,8 @@ class Agent:
             if vid == self.vehicle_id or vid in heard_ids:
                 continue
             slot = person.position_m + np.array([d * math.cos(bearing), d * math.sin(bearing), h])
+            if np.linalg.norm(slot - own_position_m) < self._ap.phantom_clearance_m:
+                continue
             out.append(
                 HorizonPlan(
                     vehicle_id=vid,

@@ -260,6 +260,23 @@ def test_teammates_not_in_formation_are_stood_in_for_by_phantoms_at_their_slots(
     np.testing.assert_allclose(phantom.positions_m[0], expected, atol=1e-9)  # at its slot, not climbing
 
 
+def test_no_phantom_stands_at_a_slot_the_mav_is_within_phantom_clearance_of():
+    """The MAV is 1.2 m from teammate 3's slot (inside the gap its rows would keep): no phantom there, so no
+    escape from it; the climbing teammate itself is still handed on (its own plan, not in formation)."""
+    slot_3 = PERSON + [8.0 * math.cos(4.0 * math.pi / 3.0), 8.0 * math.sin(4.0 * math.pi / 3.0), 8.0]
+    heard = (_plan(2, 0.0, [-4.0, 6.9, 8.9]), _plan(3, 0.0, [-4.0, -6.9, 5.0], False))
+    calls = []
+    for clearance in (2.0, 1.0):
+        agent = Agent(vehicle_id=1, agent_params=AgentParams(phantom_clearance_m=clearance))
+        spy = _Recorder(agent._controller)
+        agent._controller = cast(FormationController, spy)
+        own = _state(t=0.0, pos=tuple(slot_3 + [1.2, 0.0, 0.0]))
+        agent.tick(0.0, _inputs(0.0, own=own, detections=(_det(1, 0.0),), received=heard, roster=ROSTER))
+        calls.append([(p.vehicle_id, p.in_formation) for p in spy.calls[-1]["teammates"]])
+    assert sorted(calls[0]) == [(2, True), (3, False)]
+    assert sorted(calls[1]) == [(2, True), (3, False), (3, True)]  # 1.2 m is beyond a 1 m clearance
+
+
 def test_with_holds_off_unheard_teammates_are_stood_in_for_by_phantoms_at_their_slots():
     agent = Agent(vehicle_id=1, agent_params=AgentParams(blind_after_s=0.0))
     spy = _Recorder(agent._controller)
