@@ -5,10 +5,11 @@
 P is fixed at construction (it only changes with the terminal weights, and then the solver is rebuilt);
 q, l, u and the extra rows (e.g. separation half-planes whose normals move every tick) change per solve.
 
-Why not just an iterative solver: in recorded formation flights almost no bound is active (docs/fast-core.md,
-"The QP"), so the optimum is usually the unconstrained one, a fixed linear map of q. This module tries that
-first and proves it optimal, and only otherwise runs a real active-set solver (DAQP, dual active set, exact
-up to round-off):
+Why not just an iterative solver: in formation flight the optimum is often the unconstrained one, a fixed
+linear map of q (almost always at K = 3; in a 16-MAV ring a teammate's separation row is active on most
+ticks: docs/fast-core.md, "The QP"). This module tries that first and proves it optimal, and only otherwise
+runs a real active-set solver (DAQP, dual active set, exact up to round-off) on as small a problem as is
+exact:
 
 1. Closed form. *Resting* variables (slacks of soft rows with an exact penalty) are held at 0, the others
    take the equality-constrained minimiser z_f = -P_ff^-1 q_f. It is the optimum exactly when the KKT
