@@ -374,9 +374,9 @@ class ExactQp:
             if round_ > 0 and not (missed & ~keep).any():
                 break
             keep = np.ones_like(keep) if round_ == WORKING_SET_ROUNDS else keep | missed
-            variables, rows, idle = self._working_set(keep[:m0], keep[m0:], extra_a, q)
-            a_sub = np.vstack([self._a[rows[:m0]], extra_a[rows[m0:]]])[:, variables]
-            x_sub, flag, its, t_s = self._solve_relaxation(variables, q, a_sub, lo_all[rows], hi_all[rows])
+            variables, kept, idle = self._working_set(keep[:m0], keep[m0:], extra_a, q)
+            a_sub = np.vstack([self._a[kept[:m0]], extra_a[kept[m0:]]])[:, variables]
+            x_sub, flag, its, t_s = self._solve_relaxation(variables, q, a_sub, lo_all[kept], hi_all[kept])
             iterations += its
             time_s += t_s
             if flag < 0:

@@ -329,12 +329,9 @@ def separation_rows(
         closest_index, closest = -1, math.inf
     if lag_m is not None:
         o_offsets = o_offsets + np.maximum(-(o_normals @ np.asarray(lag_m, dtype=float)), 0.0)
-    near_floor = floor_m is not None and own_path_m[1:, 2].min() - floor_m < params.row_reach_m
-    f_steps, f_normals, f_offsets = (
-        floor_rows(own_path_m=own_path_m, floor_m=floor_m, params=params)
-        if near_floor and floor_m is not None
-        else (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
-    )
+    f_steps, f_normals, f_offsets = np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+    if floor_m is not None and own_path_m[1:, 2].min() - floor_m < params.row_reach_m:  # else none in reach
+        f_steps, f_normals, f_offsets = floor_rows(own_path_m=own_path_m, floor_m=floor_m, params=params)
     normals = np.concatenate([t_normals, o_normals, f_normals])
     offsets = np.concatenate([t_offsets, o_offsets, f_offsets])
     planes = HalfPlanes(
