@@ -46,6 +46,8 @@ WORKING_SET_ROUNDS = 5
 """Step 3 adds the rows its answer misses and solves again at most this many times, then takes every row (in
 the K = 16 benchmark flight it needs 1.6 set-ups on average, with 16 rows at the median)."""
 
+W_CACHE_SIZE = 64  # sets of variables whose W step 3 keeps (see `ExactQp._w_restricted`)
+
 
 def _daqp_solve(
     p: np.ndarray, q: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray, settings: dict
@@ -229,6 +231,7 @@ class ExactQp:
         self._gain_csr = _csr(gain)
         self._a_csr = _csr(a)
         self._p_rest_csr = _csr(p[resting])
+        self._a_reaches = a != 0.0  # (m0, n) which variables each fixed row reaches (step 3's working set)
         self._tol = float(feasibility_tol)
         self._opt_tol = float(optimality_tol)
         self._settings = {"primal_tol": float(feasibility_tol), "iter_limit": int(iteration_limit)}
@@ -259,6 +262,7 @@ class ExactQp:
             self._w: np.ndarray | None = np.linalg.inv(np.linalg.cholesky(p)).T
         except np.linalg.LinAlgError:
             self._w = None
+        self._w_sub: dict[bytes, np.ndarray] = {}  # W restricted to a round's variables, by their mask
 
     @property
     def block_count(self) -> int:
@@ -315,7 +319,6 @@ class ExactQp:
     ) -> QpResult:
         """Steps 2 and 3 after step 1 ran (`closed_form_kernel`: its verdict and its outputs z (n,), rows
         (m0,), gradient (resting,), which this may overwrite); the extra rows are checked here."""
-        tol = self._tol
         extra = extra_a is not None and extra_a.shape[0] > 0
         iterations, time_s = 0, 0.0
         extra_rows = np.zeros(0)  # the extra rows' values at z
@@ -325,11 +328,11 @@ class ExactQp:
                 return QpResult(x=z, status="solved", path="closed_form", iterations=0)
             assert extra_a is not None and extra_lo is not None and extra_hi is not None
             extra_rows = extra_a @ z
-            if not ((extra_rows < extra_lo - tol) | (extra_rows > extra_hi + tol)).any():
+            if not self._missed(extra_rows, extra_lo, extra_hi).any():
                 return QpResult(x=z, status="solved", path="closed_form", iterations=0)
         else:
             # Step 2: re-solve only the blocks whose own rows or resting variables fail.
-            bad_rows = (rows < lo - tol) | (rows > hi + tol)
+            bad_rows = self._missed(rows, lo, hi)
             bad_rest = ~(gradient >= -self._opt_tol)
             failing = set(self._var_block[self._rest_idx[bad_rest]].tolist())
             failing.update(self._row_block[bad_rows & (self._row_block >= 0)].tolist())
@@ -345,7 +348,7 @@ class ExactQp:
             if extra:
                 assert extra_a is not None and extra_lo is not None and extra_hi is not None
                 extra_rows = extra_a @ z
-                coupling_ok = not ((extra_rows < extra_lo - tol) | (extra_rows > extra_hi + tol)).any()
+                coupling_ok = not self._missed(extra_rows, extra_lo, extra_hi).any()
             if coupling_ok and failing:
                 return QpResult(
                     x=z, status="solved", path="blocks", iterations=iterations, solve_time_s=time_s
@@ -370,7 +373,7 @@ class ExactQp:
         for round_ in range(WORKING_SET_ROUNDS + 1):
             if values is None:
                 values = np.concatenate([self._a @ x, extra_a @ x])
-            missed = (values < lo_all - tol) | (values > hi_all + tol)
+            missed = self._missed(values, lo_all, hi_all)
             if round_ > 0 and not (missed & ~keep).any():
                 break
             keep = np.ones_like(keep) if round_ == WORKING_SET_ROUNDS else keep | missed
@@ -393,6 +396,10 @@ class ExactQp:
             solve_time_s=time_s,
         )
 
+    def _missed(self, values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """(m,) bool: which row values (m,) lie outside lo, hi (m,) by more than the feasibility tolerance."""
+        return (values < lo - self._tol) | (values > hi + self._tol)
+
     def _solve_relaxation(
         self, variables: np.ndarray, q: np.ndarray, a_sub: np.ndarray, lo: np.ndarray, hi: np.ndarray
     ) -> tuple[np.ndarray, int, int, float]:
@@ -401,11 +408,24 @@ class ExactQp:
         if self._w is None:
             p_sub = np.ascontiguousarray(self._p[variables][:, variables])
             return _daqp_solve(p_sub, q[variables], a_sub, lo, hi, self._settings)
-        w = self._w[variables][:, variables]
+        w = self._w_restricted(variables)
         y, flag, its, t_s = _daqp_solve(
             np.eye(w.shape[0]), w.T @ q[variables], a_sub @ w, lo, hi, self._settings
         )
         return w @ y, flag, its, t_s
+
+    def _w_restricted(self, variables: np.ndarray) -> np.ndarray:
+        """W (k, k) on the variables (n,) bool. Cached: a flight's rounds solve few distinct sets of blocks
+        (the cache is emptied when it holds W_CACHE_SIZE of them)."""
+        assert self._w is not None
+        key = variables.tobytes()
+        w = self._w_sub.get(key)
+        if w is None:
+            if len(self._w_sub) >= W_CACHE_SIZE:
+                self._w_sub.clear()
+            # sliced as rows then columns, not np.ix_: the layout decides BLAS's round-off downstream
+            w = self._w_sub[key] = self._w[variables][:, variables]
+        return w
 
     def _working_set(
         self, keep_fixed: np.ndarray, keep_extra: np.ndarray, extra_a: np.ndarray, q: np.ndarray
@@ -420,7 +440,7 @@ class ExactQp:
         ones that reach only the variables solved (a resting variable's bound goes with it)."""
         keep_fixed = keep_fixed.copy()
         keep_fixed[self._rest_rows] = False
-        reached = (np.abs(self._a[keep_fixed]).sum(axis=0) + np.abs(extra_a[keep_extra]).sum(axis=0)) > 0.0
+        reached = self._a_reaches[keep_fixed].any(axis=0) | (extra_a[keep_extra] != 0.0).any(axis=0)
         block_reached = np.zeros(len(self._blocks), dtype=bool)
         block_reached[self._var_block[reached]] = True
         variables = block_reached[self._var_block]
