@@ -42,8 +42,7 @@ LONGEST = (
     "tests/webui/test_browser.py::live",  # 130-150 s: a live station and eleven browser tests
     "tests/server/lab/test_experiments.py::ordering",  # 95-110 s (2026-11-30): 21 runs of 45 s, 2 processes
     "tests/webui/test_browser_security.py::secured_live",  # 110 s
-    "tests/webui/test_operator_page.py::test_land_all_is_reachable",  # 45-55 s each, 3 and 16 MAVs
-    "tests/webui/test_operator_page.py::alert_live",  # 40 s
+    "tests/webui/test_operator_page.py::test_land_all_is_reachable",  # 45-55 s (3 MAVs; 16 run `alone`)
 )
 
 

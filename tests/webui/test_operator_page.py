@@ -146,8 +146,12 @@ def landing_everyone(live: Live) -> bool:
 
 @pytest.mark.parametrize(
     ("vehicles", "rate_hz", "speed", "wait_landed"),
-    [(3, 20.0, 4.0, True), (16, 10.0, 2.0, False)],
-    ids=["3-mavs", "16-mavs"],
+    [
+        pytest.param(3, 20.0, 4.0, True, id="3-mavs"),
+        # alone: a 16-MAV page rendered in software, starved of CPU beside the parallel suite, once let a key
+        # press wait past Playwright's 30 s (CI, 2026-11-30)
+        pytest.param(16, 10.0, 2.0, False, id="16-mavs", marks=pytest.mark.alone),
+    ],
 )
 def test_land_all_is_reachable_at_every_scroll_position_and_shift_l_lands_everyone(
     browser, vehicles, rate_hz, speed, wait_landed
@@ -195,6 +199,9 @@ def test_land_all_is_reachable_at_every_scroll_position_and_shift_l_lands_everyo
 
 
 # ---- alerts ------------------------------------------------------------------------------------------------
+# Each alert test times the alert against ALERT_LATENCY_S of wall time, so they are marked `alone`: `make
+# test` runs them after the parallel suite, with nothing else on the machine (beside it, a busy 2-core machine
+# held the page's update past the bound in all three tries).
 
 
 @pytest.fixture(scope="module")
@@ -216,6 +223,7 @@ def alert_page(alert_live, browser) -> Iterator[OpenPage]:
     assert opened.console_errors == [], opened.console_errors
 
 
+@pytest.mark.alone
 def test_plots_draw_altitude_and_speed_per_mav_from_the_first_sample_over_mission_seconds(
     alert_live, alert_page
 ):
@@ -346,6 +354,7 @@ def autopilot(live: Live, vehicle_id: int):
     return {a.vehicle_id: a for a in live.setup.autopilots}[vehicle_id]
 
 
+@pytest.mark.alone
 def test_a_battery_at_20_percent_raises_its_alert_in_the_page_and_the_api_within_a_second(
     alert_live, alert_page
 ):
@@ -365,6 +374,7 @@ def test_a_battery_at_20_percent_raises_its_alert_in_the_page_and_the_api_within
     ap.set_battery(0.9)
 
 
+@pytest.mark.alone
 def test_two_mavs_forced_within_1_4_m_raise_a_separation_alert_within_a_second(alert_live, alert_page):
     mover, other = autopilot(alert_live, 2), autopilot(alert_live, 3)
 
@@ -385,6 +395,7 @@ def test_two_mavs_forced_within_1_4_m_raise_a_separation_alert_within_a_second(a
     acknowledge_in_the_page(alert_live, alert_page.page, alert["alert_id"])
 
 
+@pytest.mark.alone
 def test_a_cut_link_raises_a_link_alert_within_a_second(alert_live, alert_page):
     ap = autopilot(alert_live, 3)
     try:
@@ -407,6 +418,7 @@ def test_a_cut_link_raises_a_link_alert_within_a_second(alert_live, alert_page):
         ap.restore_link()
 
 
+@pytest.mark.alone
 def test_a_control_loop_slowed_below_real_time_raises_its_alert_within_a_second(alert_live, alert_page):
     station = alert_live.station
     behind = first_seen(lambda: not api_alerts(alert_live, "realtime"), timeout_s=15.0)
