@@ -185,6 +185,11 @@ def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
 SOFTWARE_GL_DPR = 0.5  # see open_operator
 
 
+def software_gl(url: str) -> str:
+    """`url` (a station page without a query) asking for the 3-D view at `SOFTWARE_GL_DPR`."""
+    return f"{url}?fixedDpr={SOFTWARE_GL_DPR:g}"
+
+
 def wait_for_operator_view(opened: OpenPage, *, ui=None) -> OpenPage:
     """Wait for the embedded operator page's canvas and controls; with the station's `ui`, also find the
     page's viser client (the one that connected last)."""
@@ -206,10 +211,10 @@ def new_page(browser: Browser, viewport: tuple[int, int] = (1100, 700)) -> OpenP
 def open_page(browser: Browser, url: str, *, ui=None, viewport: tuple[int, int] = (1100, 700)) -> OpenPage:
     """Open the landing page `url` in a new context, recording console errors, page errors and every request
     URL; wait for the embedded operator page's canvas and controls. With the station's `ui`, also find the
-    page's viser client (the one that connected last). Its 3-D view renders at full resolution (the landing
-    page is served as it is); tests that only drive the controls use `open_operator`."""
+    page's viser client (the one that connected last). The landing page hands its `fixedDpr` on to the
+    embedded view, which renders at half resolution (see `open_operator`)."""
     opened = _recording(browser, viewport)
-    opened.page.goto(url)
+    opened.page.goto(software_gl(url))
     return wait_for_operator_view(opened, ui=ui)
 
 
@@ -217,12 +222,12 @@ def sign_in(browser: Browser, url: str, user: tuple[str, str], *, ui=None) -> Op
     """Open the landing page `url` of a station that requires sign-in, as a browser would: it sends the page
     to the sign-in form; type `user` (name, secret) into it, and wait for the operator view."""
     opened = new_page(browser)
-    opened.page.goto(url)
-    opened.page.wait_for_url("**/login?next=/")
+    opened.page.goto(software_gl(url))
+    opened.page.wait_for_url(f"**/login?next=/%3FfixedDpr%3D{SOFTWARE_GL_DPR:g}")  # the display setting kept
     opened.page.fill("#name", user[0])
     opened.page.fill("#secret", user[1])
     opened.page.click("#sign-in")
-    opened.page.wait_for_url(url)
+    opened.page.wait_for_url(software_gl(url))
     return wait_for_operator_view(opened, ui=ui)
 
 
@@ -234,7 +239,7 @@ def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=N
     step of a test waits seconds for it."""
     opened = _recording(browser, viewport)
     opened.embedded = False
-    opened.page.goto(f"{url}?fixedDpr={SOFTWARE_GL_DPR}")
+    opened.page.goto(software_gl(url))
     opened.page.locator("canvas").first.wait_for(state="visible", timeout=30_000)
     opened.page.get_by_role("button", name="LAND ALL").wait_for(state="visible", timeout=30_000)
     settle(opened.page)

@@ -24,6 +24,7 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from websockets.asyncio.client import connect
 
 from server.station.api.deps import caller
+from server.station.api.display import sign_in_redirect_target
 from server.station.api.gate import Gate, bearer_or_cookie
 from webui.access import Principal, Surface
 from webui.app import TICKET_HEADER
@@ -83,7 +84,7 @@ def operator_redirect() -> RedirectResponse:
 @router.get("/operator/", response_class=HTMLResponse)
 def operator_page(request: Request) -> Response:
     if caller(request).role is None:
-        return RedirectResponse("/login?next=/operator/", status_code=303)
+        return RedirectResponse(sign_in_redirect_target("/operator/", request), status_code=303)
     page: bytes = request.app.state.operator_page
     return Response(page, media_type="text/html; charset=utf-8")
 

@@ -12,6 +12,7 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 
 from server.station.api.deps import caller, gate_of
+from server.station.api.display import display_query, sign_in_redirect_target
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 router = APIRouter(include_in_schema=False)
@@ -56,13 +57,15 @@ def index(request: Request) -> Response:
     principal = caller(request)
     gate = gate_of(request)
     if principal.role is None:
-        return RedirectResponse("/login?next=/", status_code=303)
+        return RedirectResponse(sign_in_redirect_target("/", request), status_code=303)
     who = (
         "local operator (no sign-in on loopback)"
         if gate.open
         else f"{principal.name} ({principal.role.value})"
     )
-    return HTMLResponse(landing_page(operator_url="/operator/", who=who, sign_out=not gate.open))
+    return HTMLResponse(
+        landing_page(operator_url="/operator/" + display_query(request), who=who, sign_out=not gate.open)
+    )
 
 
 @router.get("/login", response_class=HTMLResponse)

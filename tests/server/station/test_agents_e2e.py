@@ -48,6 +48,7 @@ def newest_command(state: dict) -> int:
     return max(c["command_id"] for v in state["vehicles"] for c in v["agent"]["commands"])
 
 
+@pytest.mark.alone  # bounds the acks at 0.5 s of wall time: beside the parallel suite CI measured 0.85 s
 def test_team_forms_up_takes_a_new_d_des_and_survives_losing_agents(team):
     # Take-off and the 2 pi / 3 formation at d_des within 60 s of starting the processes.
     took = wait_until(lambda: team.in_formation(range(3)), timeout_s=60.0, what="the 2 pi / 3 formation")

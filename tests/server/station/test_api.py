@@ -168,6 +168,20 @@ async def test_landing_page_embeds_the_operator_view_from_the_same_origin():
     assert "frame-ancestors 'self'" in page.headers["content-security-policy"]
 
 
+@pytest.mark.parametrize(
+    ("query", "src"),
+    [
+        ("?fixedDpr=0.5", "/operator/?fixedDpr=0.5"),
+        ("?fixedDpr=0.50&x=1", "/operator/?fixedDpr=0.5"),
+        ("?fixedDpr=0", "/operator/"),
+        ("?fixedDpr=%22%3E%3Cscript%3E", "/operator/"),
+    ],
+)
+async def test_landing_page_hands_a_valid_pixel_ratio_to_the_embedded_view_and_nothing_else(query, src):
+    page = await client_for(make_station()).get("/" + query, headers={"host": "127.0.0.1:8000"})
+    assert f'<iframe id="operator-view" src="{src}"' in page.text
+
+
 async def test_docs_page_loads_swagger_from_this_server_only():
     client = client_for(make_station())
     page = await client.get("/docs")

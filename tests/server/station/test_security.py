@@ -158,6 +158,23 @@ async def test_without_sign_in_the_state_and_the_operator_page_are_closed(statio
     assert (await c.get("/")).headers["location"].startswith("/login")
 
 
+@pytest.mark.parametrize(
+    ("path", "location"),
+    [
+        ("/?fixedDpr=0.5", "/login?next=/%3FfixedDpr%3D0.5"),
+        ("/operator/?fixedDpr=0.5", "/login?next=/operator/%3FfixedDpr%3D0.5"),
+        ("/operator/?fixedDpr=0.5&next=//evil.example", "/login?next=/operator/%3FfixedDpr%3D0.5"),
+        ("/?fixedDpr=1e9", "/login?next=/"),
+        ("/?fixedDpr=nan", "/login?next=/"),
+    ],
+)
+async def test_the_sign_in_redirect_keeps_a_valid_display_setting_and_nothing_else(
+    station, users, path, location
+):
+    page = await client(station, users).get(path)
+    assert (page.status_code, page.headers["location"]) == (303, location)
+
+
 @pytest.mark.parametrize(("method", "url", "body"), MUTATING)
 async def test_an_observer_watches_but_every_command_is_403_and_changes_nothing(
     station, users, method, url, body
