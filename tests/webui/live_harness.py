@@ -28,9 +28,10 @@ from webui.app import OperatorUi
 RATE_HZ = 20.0  # control rate of the live station in these tests (20 Hz; the MPC's own step is 0.1 s)
 SPEED = 4.0  # simulated seconds per wall second
 ACTION_TIMEOUT_MS = 90_000
-"""A click, key press or navigation may wait this long (Playwright's default is 30 s): beside the parallel suite a
-software-rendered page can leave its thread to the renderer for half a minute (seen on CI and here with the CPU
-loaded). No test bounds latency through it: the latency tests (marked `alone`) give their own time-outs."""
+"""A click, key press or navigation may wait this long (Playwright's default is 30 s): beside the parallel
+suite a software-rendered page can leave its thread to the renderer for half a minute (seen on CI and here
+with the CPU loaded). No test bounds latency through it: the latency tests (marked `alone`) give their own
+time-outs."""
 PAGE_LOAD_TIMEOUT_MS = 60_000  # the viser page on a software renderer, on a 2-core machine shared with others
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 CHROMIUM_ARGS = [
