@@ -197,11 +197,11 @@ def software_gl(url: str) -> str:
 
 
 def wait_for_operator_view(opened: OpenPage, *, ui=None) -> OpenPage:
-    """Wait for the embedded operator page's canvas and controls; with the station's `ui`, also find the
-    page's viser client (the one that connected last)."""
-    frame = opened.page.frame_locator("#operator-view")
-    frame.locator("canvas").first.wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
-    frame.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
+    """Wait for the operator page's canvas and controls (embedded or the page itself: `opened.operator`);
+    with the station's `ui`, also find the page's viser client (the one that connected last)."""
+    view = opened.operator
+    view.locator("canvas").first.wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
+    view.get_by_text("LAND ALL", exact=True).wait_for(state="visible", timeout=PAGE_LOAD_TIMEOUT_MS)
     settle(opened.page)
     if ui is not None:
         opened.client = newest_client(ui)
@@ -246,12 +246,7 @@ def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=N
     opened = _recording(browser, viewport)
     opened.embedded = False
     opened.page.goto(software_gl(url))
-    opened.page.locator("canvas").first.wait_for(state="visible", timeout=30_000)
-    opened.page.get_by_role("button", name="LAND ALL").wait_for(state="visible", timeout=30_000)
-    settle(opened.page)
-    if ui is not None:
-        opened.client = newest_client(ui)
-    return opened
+    return wait_for_operator_view(opened, ui=ui)
 
 
 def settle(page: Page) -> None:
@@ -259,7 +254,7 @@ def settle(page: Page) -> None:
     scene's shaders and the page answers nothing for seconds on a busy machine."""
     page.wait_for_function(
         "() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(true))))",
-        timeout=60_000,
+        timeout=PAGE_LOAD_TIMEOUT_MS,
     )
 
 
