@@ -167,6 +167,7 @@ def test_the_agents_control_loops_run_under_sched_fifo_where_the_system_allows_i
     assert control_loop_policies(spawned.agents) == expected
 
 
+@pytest.mark.alone  # bounds tick jitter at 20 ms of wall time: beside the parallel suite it measured 25.8 ms
 def test_web_load_does_not_reach_the_agents_control_loops(spawned):
     """50 WebSocket clients and ten 10 MB request bodies against the station while the agents fly: every
     agent keeps flying and tracking, and its tick period's p99 error stays under 20 ms under SCHED_FIFO (ten
