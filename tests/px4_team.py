@@ -38,8 +38,8 @@ import httpx
 import numpy as np
 from px4_peer import PeerMode, Px4Peer, free_udp_port
 from pymavlink.dialects.v20 import common as mavlink
+from serve_process import UNBUFFERED, printed_api_url
 
-from vehicles.net.ports import free_port
 from vehicles.px4.geodesy import GeodeticPoint, geodetic_to_enu
 
 REF = GeodeticPoint(47.397742, 8.545594, 488.0)  # the team origin; the still person stands here
@@ -409,15 +409,13 @@ def stop_process(proc: subprocess.Popen, *, timeout_s: float = 10.0) -> None:
 
 
 class Station:
-    """`skyring serve --px4 URLS` in its own process, on free ports; `api` once it serves.
+    """`skyring serve --px4 URLS` in its own process, on ports the kernel picks; `api` once it has printed it.
 
     started_s / ready_s: monotonic times of the process start and of the API answering."""
 
     def __init__(self, urls: Sequence[str], *, log_path: Path, extra: Sequence[str] = ()) -> None:
         self.log_path = log_path
         self.out_path = log_path.with_suffix(".out")
-        api_port, viser_port = free_port(), free_port()
-        self.api = f"http://127.0.0.1:{api_port}"
         cmd = [
             sys.executable,
             "-m",
@@ -434,20 +432,28 @@ class Station:
             "--rate",
             "20",
             "--port",
-            str(api_port),
+            "0",
             "--viser-port",
-            str(viser_port),
+            "0",
             "--log",
             str(log_path),
             *extra,
         ]
         self.started_s = time.monotonic()
         self.ready_s: float | None = None
+        self._api: str | None = None
         self._out = open(self.out_path, "wb")  # noqa: SIM115 - closed in stop()
-        self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=subprocess.STDOUT, cwd=REPO)
-        self.client = httpx.Client(
-            base_url=self.api, timeout=15.0
-        )  # generous: a loaded machine, a thawed process
+        self.proc = subprocess.Popen(
+            cmd, stdout=self._out, stderr=subprocess.STDOUT, cwd=REPO, env=UNBUFFERED
+        )
+        self.client = httpx.Client(timeout=15.0)  # generous: a loaded machine, a thawed process
+
+    @property
+    def api(self) -> str:
+        """The API's URL, as the station printed it (AssertionError before it has)."""
+        self._api = self._api or printed_api_url(self.out_path)
+        assert self._api is not None, f"skyring serve has printed no URL yet:\n{self.output()[-3000:]}"
+        return self._api
 
     def output(self) -> str:
         return self.out_path.read_text(errors="replace")
@@ -461,8 +467,8 @@ class Station:
                 raise AssertionError(
                     f"skyring serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}"
                 )
-            with contextlib.suppress(httpx.HTTPError):
-                response = self.client.get("/api/state")
+            with contextlib.suppress(httpx.HTTPError, AssertionError):
+                response = self.client.get(f"{self.api}/api/state")
                 if response.status_code == 200 and response.json()["time_s"] > 0.0:
                     self.ready_s = time.monotonic()
                     return self.ready_s - self.started_s
@@ -471,12 +477,16 @@ class Station:
             time.sleep(0.2)
 
     def state(self) -> dict:
-        response = self.client.get("/api/state")
+        if self.proc.poll() is not None:
+            raise AssertionError(
+                f"skyring serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}"
+            )
+        response = self.client.get(f"{self.api}/api/state")
         response.raise_for_status()
         return response.json()
 
     def post(self, path: str, **params) -> httpx.Response:
-        return self.client.post(path, params=params)
+        return self.client.post(f"{self.api}{path}", params=params)
 
     def freeze(self) -> None:
         os.kill(self.proc.pid, signal.SIGSTOP)

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+UNBUFFERED = {**os.environ, "PYTHONUNBUFFERED": "1"}  # serve's lines reach a pipe or file as printed
 
 
 def start_serve(*args: str) -> tuple[subprocess.Popen, str]:
@@ -31,14 +32,32 @@ def start_serve(*args: str) -> tuple[subprocess.Popen, str]:
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        env=UNBUFFERED,
     )
     assert proc.stdout is not None
     api = None
     for line in proc.stdout:
-        if line.startswith("operator view:"):
-            api = line.split()[2]
+        api = api or api_url_on(line)
         if line.startswith("Ctrl-C"):
             break
     assert api is not None, "skyring serve printed no operator view"
     return proc, api
+
+
+def api_url_on(line: str) -> str | None:
+    """The API's URL if `line` is serve's "operator view:" line, else None."""
+    return line.split()[2] if line.startswith("operator view:") else None
+
+
+def printed_api_url(output: Path) -> str | None:
+    """The API URL (without the trailing slash) a `skyring serve` printed into the file `output`, or None
+    while it has not. A station told to use a busy port takes another one and says so, so a test follows
+    what was printed rather than the port it asked for (another test's station may answer on that one)."""
+    try:
+        text = output.read_text(errors="replace")
+    except FileNotFoundError:
+        return None
+    for line in text.splitlines():
+        if (url := api_url_on(line)) is not None:
+            return url.rstrip("/")
+    return None

@@ -17,6 +17,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 from px4_peer import PeerMode, Px4Peer, free_udp_port
+from serve_process import UNBUFFERED, printed_api_url
 
 from server.lab.metrics import spacing_error_deg
 from vehicles.net.ports import free_port
@@ -49,7 +50,6 @@ class Team:
     peers: list[Px4Peer] = field(default_factory=list)
     agents: list[subprocess.Popen | None] = field(default_factory=list)
     station: subprocess.Popen | None = None
-    api: str = ""
     station_endpoint: str = ""
     agent_ports: list[int] = field(default_factory=list)
     agent_udp: list[int] = field(default_factory=list)
@@ -94,7 +94,6 @@ class Team:
 
     def start_station(self) -> None:
         self._station_starts += 1
-        api_port = free_port()
         listen = self.station_endpoint
         cmd = [
             sys.executable, "-m", "server.cli", "serve", "--agents", "zenoh", "--team", self.team,
@@ -102,14 +101,20 @@ class Team:
             *[a for p in self.agent_ports for a in ("--connect", f"tcp/127.0.0.1:{p}")],
             "--px4", ",".join(f"udpin://127.0.0.1:{p}" for p in self.station_udp),
             "--origin", ORIGIN, "--trees", "none", "--person", "still",
-            "--host", "127.0.0.1", "--port", str(api_port), "--viser-port", str(free_port()), "--no-log",
+            "--host", "127.0.0.1", "--port", "0", "--viser-port", "0", "--no-log",
         ]  # fmt: skip
         self.station = self._popen(cmd, f"station{self._station_starts}")
-        self.api = f"http://127.0.0.1:{api_port}"
+
+    @property
+    def api(self) -> str:
+        """The newest station's API URL as it printed it; "" while it has not (its state() is then None)."""
+        return printed_api_url(self.logs / f"station{self._station_starts}.log") or ""
 
     def _popen(self, cmd: list[str], name: str) -> subprocess.Popen:
         out = open(self.logs / f"{name}.log", "w")  # noqa: SIM115 - closed with the process
-        return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        return subprocess.Popen(
+            cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=UNBUFFERED
+        )
 
     def kill_agent(self, i: int) -> None:
         proc = self.agents[i]
@@ -139,6 +144,8 @@ class Team:
     # ---- observing ----------------------------------------------------------------------------------------
     def state(self, timeout_s: float = 2.0) -> dict | None:
         """GET /api/state, or None while the station does not answer."""
+        if not self.api:
+            return None
         try:
             return httpx.get(f"{self.api}/api/state", timeout=timeout_s).json()
         except (httpx.HTTPError, ValueError):
