@@ -19,6 +19,17 @@ if TYPE_CHECKING:
 
     from server.station.api.gate import Gate
 
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    """A failing browser test's report ends with the newest console lines of the pages it (or its module)
+    opened: an intermittent failure on CI is only ever seen there."""
+    report = yield
+    if report.failed and "live_harness" in sys.modules:
+        report.sections.append(("browser console", sys.modules["live_harness"].recent_console()))
+    return report
+
+
 EXPECT_TIMEOUT_MS = 60_000  # a software-rendered page on a busy 2-core machine can stall for half a minute
 
 

@@ -161,13 +161,17 @@ def start_live(
 
 @dataclass
 class OpenPage:
-    """A browser page on the landing page, with everything it logged and requested, and its viser client."""
+    """A browser page on the landing page, with everything it logged and requested, and its viser client.
+
+    console: every console line of the page and its frames, stamped with wall-clock seconds (a failing
+    browser test prints the newest of them: `recent_console`)."""
 
     page: Page
     console_errors: list[str]
     requests: list[str]
     client: object = None
     embedded: bool = True
+    console: list[str] = field(default_factory=list)
 
     @property
     def operator(self) -> FrameLocator | Page:
@@ -176,12 +180,27 @@ class OpenPage:
         return self.page.frame_locator("#operator-view") if self.embedded else self.page
 
 
+OPENED: list[OpenPage] = []  # every page this process opened, for `recent_console`
+
+
+def recent_console(pages: int = 4, lines: int = 40) -> str:
+    """The newest console lines of the pages opened last (what a failing test's report shows: viser logs its
+    websocket's connects and disconnects there), without the software renderer's GL driver notes."""
+    parts = []
+    for n, opened in list(enumerate(OPENED, 1))[-pages:]:
+        kept = [line for line in opened.console if "GL Driver Message" not in line][-lines:]
+        parts.append(f"page {n} ({'closed' if opened.page.is_closed() else 'open'}):\n" + "\n".join(kept))
+    return "\n".join(parts)
+
+
 def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
     context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
     context.set_default_timeout(ACTION_TIMEOUT_MS)
     page = context.new_page()
     opened = OpenPage(page=page, console_errors=[], requests=[])
+    OPENED.append(opened)
     page.on("console", lambda m: opened.console_errors.append(m.text) if m.type == "error" else None)
+    page.on("console", lambda m: opened.console.append(f"{time.time():.3f} {m.type}: {m.text}"))
     page.on("pageerror", lambda e: opened.console_errors.append(str(e)))
     page.on("request", lambda r: opened.requests.append(r.url))
     page.on("websocket", lambda ws: opened.requests.append(ws.url))
