@@ -112,6 +112,9 @@ async def operator_socket(websocket: WebSocket) -> None:
             additional_headers={TICKET_HEADER: ticket},
             max_size=None,
             compression=None,
+            # No keepalive on this loopback hop inside the process: a ping unanswered for 20 s (viser's thread
+            # starved on a loaded machine) would drop a healthy operator's page. The browser's side keeps its.
+            ping_interval=None,
         ) as upstream:
             await websocket.accept(subprotocol=upstream.subprotocol)
 
