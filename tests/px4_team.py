@@ -458,15 +458,19 @@ class Station:
     def output(self) -> str:
         return self.out_path.read_text(errors="replace")
 
+    def _assert_running(self) -> None:
+        """AssertionError with the station's exit code and output if its process has ended."""
+        if self.proc.poll() is not None:
+            raise AssertionError(
+                f"skyring serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}"
+            )
+
     def wait_ready(self, timeout_s: float) -> float:
         """Wait until /api/state answers after the first control tick (the vehicles' telemetry is in the
         view); seconds since the process started."""
         deadline = self.started_s + timeout_s
         while True:
-            if self.proc.poll() is not None:
-                raise AssertionError(
-                    f"skyring serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}"
-                )
+            self._assert_running()
             with contextlib.suppress(httpx.HTTPError, AssertionError):
                 response = self.client.get(f"{self.api}/api/state")
                 if response.status_code == 200 and response.json()["time_s"] > 0.0:
@@ -477,10 +481,7 @@ class Station:
             time.sleep(0.2)
 
     def state(self) -> dict:
-        if self.proc.poll() is not None:
-            raise AssertionError(
-                f"skyring serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}"
-            )
+        self._assert_running()
         response = self.client.get(f"{self.api}/api/state")
         response.raise_for_status()
         return response.json()

@@ -55,6 +55,7 @@ class Team:
     agent_udp: list[int] = field(default_factory=list)
     station_udp: list[int] = field(default_factory=list)
     _station_starts: int = 0
+    _api: str = ""  # the newest station's printed API URL, once read (`api`)
 
     def start(self) -> Team:
         self.station_endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -104,11 +105,15 @@ class Team:
             "--host", "127.0.0.1", "--port", "0", "--viser-port", "0", "--no-log",
         ]  # fmt: skip
         self.station = self._popen(cmd, f"station{self._station_starts}")
+        self._api = ""
 
     @property
     def api(self) -> str:
-        """The newest station's API URL as it printed it; "" while it has not (its state() is then None)."""
-        return printed_api_url(self.logs / f"station{self._station_starts}.log") or ""
+        """The newest station's API URL as it printed it; "" while it has not (its state() is then None).
+        Read from its log until found, then kept: state() is polled several times a second."""
+        if not self._api:
+            self._api = printed_api_url(self.logs / f"station{self._station_starts}.log") or ""
+        return self._api
 
     def _popen(self, cmd: list[str], name: str) -> subprocess.Popen:
         out = open(self.logs / f"{name}.log", "w")  # noqa: SIM115 - closed with the process
