@@ -499,6 +499,7 @@ def obstacle_inputs(
     d_min: float,
     d_max: float,
     person_d_min_m: float,
+    d_des_m: float,
     active: np.ndarray,
     params: FieldParams,
     margin_m: np.ndarray | float = 0.0,
@@ -509,9 +510,11 @@ def obstacle_inputs(
     (M, N+1) masks cylinders the MAV is above; margin_m (M, N+1) or a float moves both thresholds of the
     repulsion (not of the slide) out (the braking margin, `braking_margin_m`). The repulsion F(surface)
     points away from the axis. The slide (FieldParams.obstacle_slide) adds obstacle_slide * F * |tangential
-    part of the direction| along the radius about the person: outwards, or inwards when the MAV is inside
-    the obstacle's radius and the passage between the obstacle's clearance and the person's d_min is open;
-    the slide sum is clamped at slide_max_mps2.
+    part of the direction| along the radius about the person, towards the side of the obstacle where the
+    circle of radius d_des_m runs: inwards when the circle passes inside the obstacle's radius and the passage
+    between the obstacle's clearance and the person's d_min is open, outwards otherwise; the slide sum is
+    clamped at slide_max_mps2. (Sliding by the MAV's own radius instead left a MAV that a trunk had pushed
+    out beyond it stuck there, sliding further out, while its slot lay inside: docs/method.md.)
     """
     freeze = params.freeze_fraction
     gain = peak_gain(params.obstacle_peak_mps2, d_min=d_min, d_max=d_max, freeze_fraction=freeze)
@@ -538,7 +541,7 @@ def obstacle_inputs(
             )
         )
         inner_open = rho_m - obstacles.radii_m[:, None] - d_min > person_d_min_m
-        side = np.where((rho[None, :] < rho_m) & inner_open, -1.0, 1.0)
+        side = np.where((d_des_m < rho_m) & inner_open, -1.0, 1.0)
         slide = np.clip(
             (params.obstacle_slide * mag * blocked * side).sum(axis=0),
             -params.slide_max_mps2,
@@ -715,6 +718,7 @@ def external_inputs(
                 d_min=d_min,
                 d_max=d_max,
                 person_d_min_m=params.person_d_min_fraction * d_des_m,
+                d_des_m=d_des_m,
                 active=below_top,
                 params=params,
                 margin_m=margin,

@@ -319,7 +319,7 @@ def _kernel(
                         cy = centers[m, 1] - person_xy[n, 1]
                         rho_m = math.sqrt(cx * cx + cy * cy)
                         inner_open = rho_m - radii[m] - d_min > person_d_min
-                        side = -1.0 if (rho[n] < rho_m and inner_open) else 1.0
+                        side = -1.0 if (d_des < rho_m and inner_open) else 1.0
                         slide += prm[P_OBSTACLE_SLIDE] * mags[m, n] * blocked * side
                     slide = min(max(slide, -prm[P_SLIDE_MAX]), prm[P_SLIDE_MAX]) if slide == slide else slide
                     safe = _safe(rho[n])

@@ -490,9 +490,18 @@ class FormationController:
         """A hold's rows: the teammate rows eased to what braking on the spot at step_brake_mps2 keeps
         (`held_rows`: a hold entered fast must not slide onto a resting teammate, and a neighbour's gap must
         not push a resting MAV about). Before formation flight has begun (the climb after take-off, side by
-        side in a cluster) `step` gives a hold no teammates, so only the trunk rows are left."""
-        decel = self._params.separation.step_brake_mps2
-        return held_rows(rows, start_m=tick.start_p, velocity_mps=tick.start_v, decel_mps2=decel)
+        side in a cluster) `step` gives a hold no teammates, so only the trunk rows are left. The trunk rows
+        keep hold_obstacle_sigmas instead of obstacle_sigmas, as far as that braking allows: a hold has no
+        trunk field to keep it off the bark."""
+        sep = self._params.separation
+        radius = min(self._own_cov_radius(tick.own), self._params.fields.covariance_radius_cap_m)
+        return held_rows(
+            rows,
+            start_m=tick.start_p,
+            velocity_mps=tick.start_v,
+            decel_mps2=sep.step_brake_mps2,
+            trunk_widening_m=max(0.0, sep.hold_obstacle_sigmas - sep.obstacle_sigmas) * radius,
+        )
 
     def _imminent_miss(self, sol: MpcSolution, planes: HalfPlanes | None) -> float:
         """How far a solved plan misses the separation rows of its first steps (0: none missed)."""

@@ -60,6 +60,10 @@ class SeparationParams:
         rows keep beyond obstacle_clearance_m: trunks are mapped in the true world and our GPS error along a
         row's normal is unknown, so a row 1 sigma out is crossed by 16 % of the GPS errors, 1.5 sigma by 7 %
         (with 2, 3 of the 12 paper flights left their formation bounds: docs/safety.md).
+    hold_obstacle_sigmas: the same for a hold's trunk rows (`held_rows`). In formation flight the paper's
+        trunk field keeps a MAV about 1.5 m off the bark, 3 sigma, and the rows are the line behind it; a
+        hold flies without the fields, so its rows keep the field's 3 sigma themselves, as far as braking
+        on the spot allows.
     step_brake_mps2, brake_mps2: the decelerations whose braking distance each cooperative row keeps (before
         the last step, and at it); brake_margin_max_m caps that room.
     cooperative_age_s: a teammate whose plan is older than this is not trusted to hold its own row.
@@ -85,6 +89,7 @@ class SeparationParams:
     separation_m: float = 1.6
     obstacle_clearance_m: float = 0.2
     obstacle_sigmas: float = 1.5
+    hold_obstacle_sigmas: float = 3.0
     step_brake_mps2: float = 3.0
     brake_mps2: float = 2.0
     brake_margin_max_m: float = 4.0
@@ -146,24 +151,37 @@ class SeparationRows:
 
 
 def held_rows(
-    rows: SeparationRows, *, start_m: np.ndarray, velocity_mps: np.ndarray, decel_mps2: float
+    rows: SeparationRows,
+    *,
+    start_m: np.ndarray,
+    velocity_mps: np.ndarray,
+    decel_mps2: float,
+    trunk_widening_m: float = 0.0,
 ) -> SeparationRows:
-    """A hold's rows (formation.py): each teammate row eased to what braking on the spot can keep.
+    """A hold's rows (formation.py): each teammate row eased to what braking on the spot can keep, each
+    trunk row widened by trunk_widening_m as far as that braking allows.
 
     Braking at decel_mps2 against the start velocity (3,) m/s runs straight from start_m (3,) to the stop
     point, so the path's least reach along a row's normal is at one of the two. A teammate row that this path
     would break is moved back to that reach: a holding MAV closes on a teammate no further than braking
-    must, and a neighbour's gap never pushes a resting MAV about. Trunk and floor rows stay as they are."""
-    t = rows.teammate_rows
-    if t == 0:
+    must, and a neighbour's gap never pushes a resting MAV about. A trunk row is moved out by
+    trunk_widening_m (m), but never past that reach, so the wider margin never pushes a hold away from a
+    trunk it already stands closer to; it only stops it sooner. Floor rows stay as they are."""
+    t, o = rows.teammate_rows, rows.obstacle_rows
+    if t == 0 and (o == 0 or trunk_widening_m <= 0.0):
         return rows
     start = np.asarray(start_m, dtype=float)
     v = np.asarray(velocity_mps, dtype=float)
     stop = start + v * (np.linalg.norm(v) / (2.0 * decel_mps2))
     planes = rows.planes
-    normals = np.column_stack([planes.normals_xy[:t], planes.z_normals[:t]])
+    normals = np.column_stack([planes.normals_xy, planes.z_normals])
+    reach = np.minimum(normals @ start, normals @ stop)  # (R,) the braking path's least reach
     offsets = planes.offsets.copy()
-    offsets[:t] = np.minimum(offsets[:t], np.minimum(normals @ start, normals @ stop))
+    offsets[:t] = np.minimum(offsets[:t], reach[:t])
+    trunk = slice(t, t + o)
+    scale = np.linalg.norm(normals[trunk], axis=1)  # the rows' weight: normals and offsets are scaled
+    widened = np.minimum(offsets[trunk] + scale * trunk_widening_m, reach[trunk])
+    offsets[trunk] = np.maximum(offsets[trunk], widened)
     return replace(rows, planes=replace(planes, offsets=offsets))
 
 

@@ -368,6 +368,18 @@ def test_obstacle_blocking_the_circle_also_pushes_the_mav_outwards():
     assert f @ radial > plain @ radial + 0.5
 
 
+def test_a_mav_pushed_out_beyond_a_trunk_slides_inwards_to_its_circle():
+    """A trunk at radius 10 m beside a MAV at 11 m: the d_des = 8 m circle runs inside the trunk with the
+    passage open (10 - 0.3 - 1.5 = 8.2 m > the person's 7 m), so the slide points inwards, round the trunk
+    towards the slot, not further out."""
+    own = on_circle(0.0, 11.0)
+    beside = on_circle(8.0, 10.0)[:2]  # 1.4 m ahead tangentially, 1.5 m from the MAV's side of its bark
+    f = inputs(own, obstacles=trees(beside), params=FieldParams(obstacle_slide=1.0)).obstacles[0, :2]
+    plain = inputs(own, obstacles=trees(beside), params=FieldParams(obstacle_slide=0.0)).obstacles[0, :2]
+    radial, _ = radial_tangent(own)
+    assert f @ radial < plain @ radial - 0.5
+
+
 def test_obstacle_above_which_the_mav_flies_is_ignored():
     own = np.array([8.0, 0.0, 8.9])
     low = ObstacleSet(np.array([[8.0, 2.0]]), np.array([0.3]), np.array([5.0]))

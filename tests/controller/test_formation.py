@@ -340,6 +340,22 @@ def test_a_resting_teammate_inside_the_gap_does_not_push_a_hold_about():
     assert hold_closing_on(mate, speed_mps=0.0, ticks=20) == pytest.approx(1.2, abs=0.01)
 
 
+def test_a_hold_entered_fast_towards_a_trunk_stops_three_sigma_off_its_bark():
+    """At 4.5 m/s towards a trunk whose bark is 4 m ahead: the hold's trunk rows keep 0.2 m plus 3
+    covariance radii (0.5 m each), 1.7 m; with the formation's 1.5 radii the plan stopped 0.95 m off."""
+    ctrl = controller()
+    here = on_circle(0.0)
+    trunk = Obstacle(obstacle_id="t", center_m=here[:2] + np.array([0.0, 4.3]), radius_m=0.3)
+    step(ctrl, state(here), obstacles=(trunk,))  # formation flight has begun
+    out = step(ctrl, state(here, (0.0, 4.5, 0.0)), obstacles=(trunk,), hold=True)
+    closest = np.inf
+    for tick in range(1, 60):
+        p, v = out.plan.positions_m[1], out.plan.velocities_mps[1]
+        out = step(ctrl, state(p, v), now_s=0.1 * tick, obstacles=(trunk,), hold=True)
+        closest = min(closest, float(np.linalg.norm(out.plan.positions_m[0, :2] - trunk.center_m)) - 0.3)
+    assert closest == pytest.approx(1.7, abs=0.05)
+
+
 @pytest.mark.parametrize(("bounded", "most_mps2"), [(True, 3.0), (False, 5.2)])
 def test_a_plan_backing_off_a_close_teammate_asks_no_more_than_the_input_box(bounded, most_mps2):
     """At 3.8 m/s towards a teammate resting 2 m ahead, the fields push back hard: the plan's horizontal

@@ -251,6 +251,40 @@ def test_a_hold_keeps_a_teammate_row_that_braking_keeps_and_every_trunk_row_as_i
     np.testing.assert_array_equal(held.planes.offsets, rows.planes.offsets)
 
 
+def trunk_y_limits(rows: SeparationRows) -> np.ndarray:
+    """How far north each trunk row lets the MAV go (rows facing south: y <= b / n)."""
+    trunk = slice(rows.teammate_rows, rows.teammate_rows + rows.obstacle_rows)
+    return rows.planes.offsets[trunk] / rows.planes.normals_xy[trunk, 1]
+
+
+def trunk_rows_of_a_hold(*, north_mps: float, widening_m: float) -> np.ndarray:
+    """The trunk rows' north limits of a hold at (0, 0, 8) moving north_mps towards the trunk 3 m north
+    (radius 0.5: the rows at y <= 3 - 0.5 - 0.2 = 2.3), widened by widening_m."""
+    held = held_rows(
+        holding_near_a_trunk(4.0),
+        start_m=np.array([0.0, 0.0, 8.0]),
+        velocity_mps=np.array([0.0, north_mps, 0.0]),
+        decel_mps2=3.0,
+        trunk_widening_m=widening_m,
+    )
+    return trunk_y_limits(held)
+
+
+def test_a_hold_widens_every_trunk_row_by_the_widening():
+    np.testing.assert_allclose(trunk_rows_of_a_hold(north_mps=0.0, widening_m=0.0), 2.3, atol=1e-12)
+    np.testing.assert_allclose(trunk_rows_of_a_hold(north_mps=0.0, widening_m=0.75), 1.55, atol=1e-12)
+
+
+def test_a_hold_widens_a_trunk_row_no_further_than_braking_at_the_bound_stops():
+    """At 3 m/s north, braking at 3 m/s^2 stops 1.5 m on: a widening to y <= 1.3 gives y <= 1.5."""
+    np.testing.assert_allclose(trunk_rows_of_a_hold(north_mps=3.0, widening_m=1.0), 1.5, atol=1e-12)
+
+
+def test_a_hold_at_rest_is_never_pushed_away_from_a_trunk_by_the_widening():
+    """A widening to y <= -0.7 gives y <= 0, where the MAV rests."""
+    np.testing.assert_allclose(trunk_rows_of_a_hold(north_mps=0.0, widening_m=3.0), 0.0, atol=1e-12)
+
+
 def test_parameters_out_of_range_are_refused():
     with pytest.raises(ValueError, match="separation_m"):
         SeparationParams(separation_m=-1.0)
