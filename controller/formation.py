@@ -406,6 +406,10 @@ class FormationController:
             self._cov_key, self._cov_radius = key, (float(covariance_radius_m(cov)) if _finite(cov) else 0.0)
         return self._cov_radius
 
+    def _row_cov_radius(self, own: VehicleState) -> float:
+        """Our covariance radius as the separation rows take it: capped at covariance_radius_cap_m."""
+        return min(self._own_cov_radius(own), self._params.fields.covariance_radius_cap_m)
+
     def _inputs(
         self,
         tick: _Tick,
@@ -478,7 +482,7 @@ class FormationController:
             mate_ages_s=ages,
             inflation_m=radii + age_margin_m(ages, speed_term_m=speed_term, params=prm.separation),
             obstacles=obstacle_set,
-            own_cov_radius_m=min(self._own_cov_radius(own), prm.fields.covariance_radius_cap_m),
+            own_cov_radius_m=self._row_cov_radius(own),
             dt_s=self._mpc_params.dt_s,
             own_id=self._id,
             params=prm.separation,
@@ -494,13 +498,13 @@ class FormationController:
         keep hold_obstacle_sigmas instead of obstacle_sigmas, as far as that braking allows: a hold has no
         trunk field to keep it off the bark."""
         sep = self._params.separation
-        radius = min(self._own_cov_radius(tick.own), self._params.fields.covariance_radius_cap_m)
         return held_rows(
             rows,
             start_m=tick.start_p,
             velocity_mps=tick.start_v,
             decel_mps2=sep.step_brake_mps2,
-            trunk_widening_m=max(0.0, sep.hold_obstacle_sigmas - sep.obstacle_sigmas) * radius,
+            trunk_widening_m=max(0.0, sep.hold_obstacle_sigmas - sep.obstacle_sigmas)
+            * self._row_cov_radius(tick.own),
         )
 
     def _imminent_miss(self, sol: MpcSolution, planes: HalfPlanes | None) -> float:
