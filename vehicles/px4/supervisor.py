@@ -21,6 +21,7 @@ observations, and executes the one `Command` that `step` returns. Engagement:
     FOLLOWING -stale output-> WATCHDOG_HOLD -fresh output-> ENGAGING ; -stale longer-> LANDING
     FOLLOWING -PX4 reported a failsafe, yet shows offboard-> LANDING (failsafe_landing)
     FOLLOWING -the supervisor itself stalled past stall_land_after_s-> LANDING (failsafe_landing)
+    holds -the same stall before telemetry showed the Hold-> LANDING (failsafe_landing)
     any -land-> LANDING (latched) -on the ground, disarmed-> IDLE
     FOLLOWING/ENGAGING/holds -mode changed by someone else-> RELEASED -takeoff-> ENGAGING or TAKING_OFF
 """
@@ -414,9 +415,14 @@ class OffboardSupervisor:
         ends its offboard-loss failsafe at once). A failsafe PX4 still runs is left to it (`_foreign_mode`).
         """
         offboard = (Engagement.FOLLOWING, Engagement.ENGAGING)
-        if self.engagement in offboard and obs.stalled_s > self.params.stall_land_after_s:
+        holds = (Engagement.WATCHDOG_HOLD, Engagement.HOLDING)
+        # A Hold that telemetry has not shown yet may never have reached PX4 before the stall: PX4 was still
+        # in Offboard without set-points, so its failsafe is as likely as while following.
+        unconfirmed_hold = self.engagement in holds and obs.mode is not FlightMode.HOLD
+        stalled = obs.stalled_s > self.params.stall_land_after_s
+        if stalled and (self.engagement in offboard or unconfirmed_hold):
             return self._failsafe_land(stall_s=obs.stalled_s)
-        held = (*offboard, Engagement.WATCHDOG_HOLD, Engagement.HOLDING)
+        held = (*offboard, *holds)
         if (
             self.engagement in held
             and obs.failsafe_reported

@@ -305,6 +305,33 @@ def test_a_stall_of_the_whole_station_while_following_lands_the_vehicle_as_px4s_
     assert sup.watchdog_landings == 0
 
 
+def watchdog_holding():
+    """A following supervisor whose agent went quiet: it asked for Hold; returns it and the time reached."""
+    sup, t = following()
+    sup.note_setpoint(t)
+    cmds = run(sup, t + 0.05, t + 0.7, FlightMode.OFFBOARD, setpoints=False)
+    assert [c for _, c in cmds] == [Command.HOLD] and sup.engagement is Engagement.WATCHDOG_HOLD
+    return sup, t + 0.7
+
+
+def test_a_stall_before_telemetry_showed_the_watchdogs_hold_lands_the_vehicle_as_px4s_failsafe():
+    sup, t = watchdog_holding()
+    # the Hold may not have reached PX4 before the whole station stalled: PX4 lost its set-points in Offboard
+    cmd = sup.step(
+        Observation(now_s=t + 6.0, mode=FlightMode.OFFBOARD, armed=True, in_air=True, stalled_s=6.0)
+    )
+    assert cmd is Command.LAND
+    assert sup.engagement is Engagement.LANDING and sup.failsafe_landing and sup.stall_s == 6.0
+    assert sup.watchdog_landings == 0
+
+
+def test_a_stall_in_a_hold_telemetry_shows_is_no_failsafe():
+    sup, t = watchdog_holding()
+    run(sup, t, t + 1.0, FlightMode.HOLD, setpoints=False)  # PX4 holds: it needs no set-points
+    cmd = sup.step(Observation(now_s=t + 1.5, mode=FlightMode.HOLD, armed=True, in_air=True, stalled_s=2.5))
+    assert cmd is None and sup.engagement is Engagement.WATCHDOG_HOLD and not sup.failsafe_landing
+
+
 def test_a_short_gap_in_the_supervisor_is_no_stall():
     sup, t = following()
     sup.note_setpoint(t + 1.0)
