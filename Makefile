@@ -49,14 +49,21 @@ kernels: $(STAMP)
 # 2 cores: 560-583 s with 3 workers against 605-648 s with 2.
 WORKERS := $(shell echo $$(( $$(nproc) + 1 )))
 
-# Two passes, both always run: the suite on the workers, then the tests marked `alone` one at a time with the
-# machine to themselves (they bound wall-clock latency, which the parallel suite's load would decide).
+# Three passes, all always run: the suite without the browser on the workers; then the browser tests on two
+# workers, away from the suite's simulations and experiment pools (beside them a software-rendered page starved
+# for minutes on CI: two of its experiment fixtures run 2 processes each, on 3 workers and 2 cores); then the
+# tests marked `alone` one at a time with the machine to themselves (they bound wall-clock latency, which the
+# parallel passes' load would decide).
+PAGE_WORKERS := 2
+
 test: $(STAMP) chromium footage $(POSE_STAMP) kernels
-	@$(PY) -m pytest -q -ra -n $(WORKERS) --dist loadgroup --durations=15 -m "not px4_sitl and not alone"; \
+	@$(PY) -m pytest -q -ra -n $(WORKERS) --dist loadgroup --durations=15 -m "not px4_sitl and not alone and not browser"; \
 	parallel=$$?; \
+	$(PY) -m pytest -q -ra -n $(PAGE_WORKERS) --dist loadgroup --durations=5 -m "browser and not px4_sitl and not alone"; \
+	pages=$$?; \
 	$(PY) -m pytest -q -ra -p no:xdist --durations=5 -m "alone and not px4_sitl"; \
 	alone=$$?; \
-	[ $$parallel -eq 0 ] && [ $$alone -eq 0 ]
+	[ $$parallel -eq 0 ] && [ $$pages -eq 0 ] && [ $$alone -eq 0 ]
 
 # The PX4 scenarios against real PX4 SITL (SIH): PX4_SITL=path/to/build/px4_sitl_default/bin/px4 (docs/px4.md
 # says how to build it). One scenario at a time: each starts and stops its own PX4 instances.
