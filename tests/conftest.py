@@ -41,6 +41,7 @@ LONGEST = (
     "tests/webui/test_agents_spawn.py::spawned",  # 150-170 s: the 60 s rehearsal, web load, a browser
     "tests/webui/test_browser.py::live",  # 130-150 s: a live station and eleven browser tests
     "tests/server/lab/test_experiments.py::ordering",  # 95-110 s (2026-11-30): 21 runs of 45 s, 2 processes
+    "tests/server/lab/test_sim_acceptance.py::paper_run",  # 13 flights of 120 s (K = 3, 5, 8, seeds 1-4)
     "tests/webui/test_browser_security.py::secured_live",  # 110 s
     "tests/webui/test_operator_page.py::test_land_all_is_reachable",  # 45-55 s (3 MAVs; 16 run `alone`)
 )

@@ -1,4 +1,4 @@
-"""Issue 3's acceptance runs: the paper's world for 120 s with K = 3, 5, 8, and total link loss.
+"""Issue 3's acceptance runs: the paper's world for 120 s, K = 3, 5, 8, seeds 1-4, and total link loss.
 
 The control rate is 10 Hz here, the MPC's own step (dt = 0.1 s): the controller re-plans every step as at
 100 Hz, only the way-point follower sees set-points less often. At the paper's 100 Hz the same runs take ten
@@ -15,14 +15,16 @@ from server.lab.simulation import SimConfig, run_simulation
 
 RATE_HZ = 10.0
 DURATION_S = 120.0
+SEEDS = (1, 2, 3, 4)  # the formation's bounds hold for every seed, not for one lucky draw
+TEAMS = [(k, seed) for k in (3, 5, 8) for seed in SEEDS]
 
 
 @cache
-def _paper_run(vehicles: int, comm_loss: float = 0.0) -> dict:
+def _paper_run(vehicles: int, comm_loss: float = 0.0, seed: int = 1) -> dict:
     config = SimConfig(
         vehicles=vehicles,
         duration_s=DURATION_S,
-        seed=1,
+        seed=seed,
         person="paper",
         trees="paper",
         comm_loss=comm_loss,
@@ -39,33 +41,33 @@ def paper_run() -> Callable[..., dict]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("k", [3, 5, 8])
-def test_spacing_error_is_at_most_10_degrees(paper_run, k):
-    assert paper_run(k)["spacing_error_deg"] <= 10.0
+@pytest.mark.parametrize(("k", "seed"), TEAMS)
+def test_spacing_error_is_at_most_10_degrees(paper_run, k, seed):
+    assert paper_run(k, seed=seed)["spacing_error_deg"] <= 10.0
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("k", [3, 5, 8])
-def test_distance_error_is_at_most_1_m(paper_run, k):
-    assert paper_run(k)["distance_error_m"] <= 1.0
+@pytest.mark.parametrize(("k", "seed"), TEAMS)
+def test_distance_error_is_at_most_1_m(paper_run, k, seed):
+    assert paper_run(k, seed=seed)["distance_error_m"] <= 1.0
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("k", [3, 5, 8])
-def test_the_person_is_in_frame_at_least_90_percent_of_frames(paper_run, k):
-    assert paper_run(k)["in_frame_fraction"] >= 0.9
+@pytest.mark.parametrize(("k", "seed"), TEAMS)
+def test_the_person_is_in_frame_at_least_90_percent_of_frames(paper_run, k, seed):
+    assert paper_run(k, seed=seed)["in_frame_fraction"] >= 0.9
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("k", [3, 5, 8])
-def test_no_two_mavs_come_closer_than_1_5_m(paper_run, k):
-    assert paper_run(k)["min_separation_m"] >= 1.5
+@pytest.mark.parametrize(("k", "seed"), TEAMS)
+def test_no_two_mavs_come_closer_than_1_5_m(paper_run, k, seed):
+    assert paper_run(k, seed=seed)["min_separation_m"] >= 1.5
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("k", [3, 5, 8])
-def test_no_mav_touches_a_trunk(paper_run, k):
-    assert paper_run(k)["min_obstacle_clearance_m"] > 0.0
+@pytest.mark.parametrize(("k", "seed"), TEAMS)
+def test_no_mav_touches_a_trunk(paper_run, k, seed):
+    assert paper_run(k, seed=seed)["min_obstacle_clearance_m"] > 0.0
 
 
 @pytest.mark.slow
