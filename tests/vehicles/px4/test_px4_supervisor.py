@@ -294,15 +294,20 @@ def test_offboard_read_before_skyring_asked_for_it_is_not_taken_as_engaged():
     assert sup.engagement is Engagement.ENGAGING
 
 
-def test_a_stall_of_the_whole_station_while_following_lands_the_vehicle_as_px4s_failsafe():
-    sup, t = following()
-    sup.note_setpoint(t + 6.0)  # the agent's first set-point after the stall came in before this step
+def assert_a_6_s_stall_lands_it_as_px4s_failsafe(sup, t):
+    """The first step after the whole station stood still 6 s, with telemetry still showing Offboard."""
     cmd = sup.step(
         Observation(now_s=t + 6.0, mode=FlightMode.OFFBOARD, armed=True, in_air=True, stalled_s=6.0)
     )
     assert cmd is Command.LAND
     assert sup.engagement is Engagement.LANDING and sup.failsafe_landing and sup.stall_s == 6.0
     assert sup.watchdog_landings == 0
+
+
+def test_a_stall_of_the_whole_station_while_following_lands_the_vehicle_as_px4s_failsafe():
+    sup, t = following()
+    sup.note_setpoint(t + 6.0)  # the agent's first set-point after the stall came in before this step
+    assert_a_6_s_stall_lands_it_as_px4s_failsafe(sup, t)
 
 
 def watchdog_holding():
@@ -317,12 +322,7 @@ def watchdog_holding():
 def test_a_stall_before_telemetry_showed_the_watchdogs_hold_lands_the_vehicle_as_px4s_failsafe():
     sup, t = watchdog_holding()
     # the Hold may not have reached PX4 before the whole station stalled: PX4 lost its set-points in Offboard
-    cmd = sup.step(
-        Observation(now_s=t + 6.0, mode=FlightMode.OFFBOARD, armed=True, in_air=True, stalled_s=6.0)
-    )
-    assert cmd is Command.LAND
-    assert sup.engagement is Engagement.LANDING and sup.failsafe_landing and sup.stall_s == 6.0
-    assert sup.watchdog_landings == 0
+    assert_a_6_s_stall_lands_it_as_px4s_failsafe(sup, t)
 
 
 def test_a_stall_in_a_hold_telemetry_shows_is_no_failsafe():
