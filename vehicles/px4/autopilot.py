@@ -610,12 +610,11 @@ class Px4Autopilot:
         return max(self._loop_gap_s, running)
 
     def _stalled(self, now: float) -> bool:
-        """The event loop stalled past stall_land_after_s while skyring flew the vehicle in offboard: the
-        whole ground station stalled, so PX4 runs its offboard-loss failsafe (the supervisor lands it next
-        step)."""
-        limit = self.config.supervisor.stall_land_after_s
-        offboard = (Engagement.FOLLOWING, Engagement.ENGAGING)
-        return self._supervisor.engagement in offboard and self._loop_stall_s(now) > limit
+        """The whole ground station stalled long enough for PX4's offboard-loss failsafe (the supervisor's
+        rule, `OffboardSupervisor.stall_lands`): the supervisor lands it next step (cache lock held)."""
+        c = self._cache
+        mode = skyring_mode(c.px4_mode, armed=c.armed, in_air=c.in_air)
+        return self._supervisor.stall_lands(mode, self._loop_stall_s(now))
 
     def _failsafe_landing_reason(self, now: float) -> str:
         """Why a vehicle lands for PX4's failsafe that PX4 itself no longer reports (cache lock held)."""

@@ -106,6 +106,9 @@ class Observation:
     stalled_s: float = 0.0
 
 
+_OFFBOARD = (Engagement.FOLLOWING, Engagement.ENGAGING)  # skyring streams set-points to PX4
+_HOLDS = (Engagement.WATCHDOG_HOLD, Engagement.HOLDING)  # skyring asked PX4 for Hold
+
 # What each command should make the flight mode show.
 _EXPECTED_MODE = {
     Command.START_OFFBOARD: FlightMode.OFFBOARD,
@@ -414,15 +417,9 @@ class OffboardSupervisor:
         now may be from before), or when PX4 reported a failsafe it has already left (MAVSDK's stale set-point
         ends its offboard-loss failsafe at once). A failsafe PX4 still runs is left to it (`_foreign_mode`).
         """
-        offboard = (Engagement.FOLLOWING, Engagement.ENGAGING)
-        holds = (Engagement.WATCHDOG_HOLD, Engagement.HOLDING)
-        # A Hold that telemetry has not shown yet may never have reached PX4 before the stall: PX4 was still
-        # in Offboard without set-points, so its failsafe is as likely as while following.
-        unconfirmed_hold = self.engagement in holds and obs.mode is not FlightMode.HOLD
-        stalled = obs.stalled_s > self.params.stall_land_after_s
-        if stalled and (self.engagement in offboard or unconfirmed_hold):
+        if self.stall_lands(obs.mode, obs.stalled_s):
             return self._failsafe_land(stall_s=obs.stalled_s)
-        held = (*offboard, *holds)
+        held = (*_OFFBOARD, *_HOLDS)
         if (
             self.engagement in held
             and obs.failsafe_reported
@@ -431,6 +428,15 @@ class OffboardSupervisor:
         ):
             return self._failsafe_land(stall_s=None)
         return None
+
+    def stall_lands(self, mode: FlightMode, stalled_s: float) -> bool:
+        """Whether a stall of stalled_s seconds, with telemetry showing `mode`, has set off PX4's
+        offboard-loss failsafe: past stall_land_after_s while skyring streamed set-points, or in a Hold that
+        telemetry has not shown yet (it may never have reached PX4, then still in Offboard without
+        set-points)."""
+        if stalled_s <= self.params.stall_land_after_s:
+            return False
+        return self.engagement in _OFFBOARD or (self.engagement in _HOLDS and mode is not FlightMode.HOLD)
 
     def _failsafe_land(self, *, stall_s: float | None) -> Command:
         self.engagement = Engagement.LANDING
