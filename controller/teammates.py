@@ -54,6 +54,17 @@ def align_rows(
                 out[i, n, c] = (1.0 - a) * positions[r, lo, c] + a * positions[r, hi, c]
 
 
+@numba.njit(cache=True)
+def _all_below(values, limit):  # pragma: no cover - compiled
+    """Whether every |value| of a 2-D array is below limit (False for a NaN), without numpy's per-call cost:
+    every plan of every teammate is checked on arrival."""
+    for row in values:
+        for v in row:
+            if not abs(v) < limit:
+                return False
+    return True
+
+
 class TeammateView:
     """What the formation controller gets of a `TeammateTable` for one tick: the plans stamped at or after
     since_s, then the extra plans (the agent's phantoms, stand-ins for unheard teammates)."""
@@ -116,6 +127,7 @@ class TeammateTable:
     def __init__(self, *, own_id: int, plan_length: int, capacity: int = 16) -> None:
         self._own = int(own_id)
         self._plans: dict[int, HorizonPlan] = {}
+        self._row_of: dict[int, int] = {}  # vehicle id -> its row
         self._count = 0
         capacity, length = max(int(capacity), 1), max(int(plan_length), 2)
         # Row r holds one teammate's latest plan: positions (capacity, length, 3), the sender's GPS offset
@@ -169,29 +181,29 @@ class TeammateTable:
             vid == self._own
             or not (math.isfinite(plan.stamp_s) and math.isfinite(plan.dt_s) and plan.dt_s > 0.0)
             or positions.shape[0] < 2
-            or not float(np.abs(positions).max()) < SANE_ABS
-            or not float(np.abs(cov).max()) < SANE_ABS
+            or not (_all_below(positions, SANE_ABS) and _all_below(cov, SANE_ABS))
         ):
             return "refused"
         old = self._plans.get(vid)
         if old is not None and plan.stamp_s < old.stamp_s:
             return "older"
-        rows = self._row_ids[: self._count]
-        row = int(np.searchsorted(rows, vid))
         if old is None:
+            row = int(np.searchsorted(self._row_ids[: self._count], vid))
             if self._count == self._positions.shape[0]:
                 self._grow(2 * self._count, self._positions.shape[1])
             for name in self._COLUMNS:
                 arr = getattr(self, name)
                 arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
             self._count += 1
+            self._row_ids[row] = vid
+            self._row_of = {int(v): r for r, v in enumerate(self._row_ids[: self._count].tolist())}
+        row = self._row_of[vid]
         length = positions.shape[0]
         if length > self._positions.shape[1]:
             self._grow(self._positions.shape[0], length)
         if old is None or old.position_cov_m2 is not cov:  # the sender's covariance rarely changes
             self._radii[row] = covariance_radius_m(cov)
         self._plans[vid] = plan
-        self._row_ids[row] = vid
         self._positions[row, :length] = positions
         self._lengths[row] = length
         self._stamps[row] = plan.stamp_s

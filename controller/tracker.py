@@ -114,30 +114,28 @@ class TrackerStats:
     out_of_order: int = 0
 
 
-_F_PV = np.eye(6, k=3)  # position <- velocity coupling in F
-_V_DIAG = np.diag([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
-
-
-def _noise_templates(noise_psd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(6, 6) matrices M_pp, M_pv, M_vv with Q = Q_pp M_pp + Q_pv M_pv + Q_vv M_vv (per unit density)."""
-    zeros, diag = np.zeros((3, 3)), np.diag(np.asarray(noise_psd, dtype=float))
-    return (
-        np.block([[diag, zeros], [zeros, zeros]]),
-        np.block([[zeros, diag], [diag, zeros]]),
-        np.block([[zeros, zeros], [zeros, diag]]),
-    )
-
-
-def _transition(
-    dt_s: float, tau_s: float, templates: tuple[np.ndarray, np.ndarray, np.ndarray]
-) -> tuple[np.ndarray, np.ndarray]:
-    b = float(np.exp(-dt_s / tau_s))
+@numba.njit(cache=True)
+def _transition_into(b, dt_s, tau_s, psd, F, Q):  # pragma: no cover - compiled
+    """Write F (6, 6) and Q (6, 6) of the decaying-velocity model over dt_s into F = I and Q = 0, for
+    b = exp(-dt_s / tau_s) and psd (3,) the velocity noise densities (module docstring). One compiled call:
+    every detection at a new stamp asks for a new pair."""
     one_b, one_b2 = 1.0 - b, 1.0 - b * b
-    F = np.eye(6) + (tau_s * one_b) * _F_PV - one_b * _V_DIAG
-    m_pp, m_pv, m_vv = templates
-    Q = (tau_s * tau_s * (dt_s - 2.0 * tau_s * one_b + 0.5 * tau_s * one_b2)) * m_pp
-    Q += (tau_s * tau_s * (one_b - 0.5 * one_b2)) * m_pv
-    Q += (0.5 * tau_s * one_b2) * m_vv
+    f_pv = tau_s * one_b
+    q_pp = tau_s * tau_s * (dt_s - 2.0 * tau_s * one_b + 0.5 * tau_s * one_b2)
+    q_pv = tau_s * tau_s * (one_b - 0.5 * one_b2)
+    q_vv = 0.5 * tau_s * one_b2
+    for a in range(3):
+        F[a, 3 + a] = f_pv
+        F[3 + a, 3 + a] = 1.0 - one_b
+        Q[a, a] = q_pp * psd[a]
+        Q[a, 3 + a] = q_pv * psd[a]
+        Q[3 + a, a] = q_pv * psd[a]
+        Q[3 + a, 3 + a] = q_vv * psd[a]
+
+
+def _transition(dt_s: float, tau_s: float, psd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    F, Q = np.eye(6), np.zeros((6, 6))
+    _transition_into(float(np.exp(-dt_s / tau_s)), dt_s, tau_s, psd, F, Q)
     return F, Q
 
 
@@ -177,7 +175,7 @@ def _predicted(dt_s, tau_s, psd, x, p, x_out, p_out):  # pragma: no cover - comp
 def transition(*, dt_s: float, params: TrackerParams) -> tuple[np.ndarray, np.ndarray]:
     """(F (6, 6), Q (6, 6)) of the decaying-velocity model over dt_s >= 0 (module docstring)."""
     psd = np.square(np.asarray(params.velocity_noise_mps_per_sqrt_s, dtype=float))
-    return _transition(dt_s, params.velocity_time_constant_s, _noise_templates(psd))
+    return _transition(dt_s, params.velocity_time_constant_s, psd)
 
 
 @dataclass
@@ -204,7 +202,6 @@ class PersonTracker:
         self._tau = self.params.velocity_time_constant_s
         psd = np.square(np.asarray(self.params.velocity_noise_mps_per_sqrt_s, dtype=float))
         self._psd = psd
-        self._templates = _noise_templates(psd)
         self._memo: tuple[float, np.ndarray, np.ndarray] = (-1.0, np.eye(6), np.zeros((6, 6)))
         self._P0 = np.diag(np.asarray(self.params.initial_cov_diag, dtype=float))
         self._kf = KalmanFilter(dim_x=6, dim_z=3)
@@ -316,7 +313,7 @@ class PersonTracker:
         """F, Q over dt_s, remembering the last pair (gating and prediction ask for the same dt in turn).
         Callers must not modify the returned arrays."""
         if dt_s != self._memo[0]:
-            self._memo = (dt_s, *_transition(dt_s, self._tau, self._templates))
+            self._memo = (dt_s, *_transition(dt_s, self._tau, self._psd))
         return self._memo[1], self._memo[2]
 
     def _within_gate(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> bool:

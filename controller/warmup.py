@@ -25,7 +25,8 @@ def warm_up(params: ControllerParams | None = None) -> None:
     kernel on the tick's path has run once."""
     params = params or ControllerParams()
     tracker = PersonTracker(params.tracker)
-    tracker.update(Detection(source_id=2, stamp_s=0.0, position_m=np.zeros(3), cov_m2=np.eye(3)))
+    for stamp in (0.0, 0.02):  # the second predicts (the transition kernel) before it updates
+        tracker.update(Detection(source_id=2, stamp_s=stamp, position_m=np.zeros(3), cov_m2=np.eye(3)))
     person = tracker.estimate(0.05) or PersonEstimate(
         stamp_s=0.05, position_m=np.zeros(3), velocity_mps=np.zeros(3), cov=np.eye(6)
     )
