@@ -44,10 +44,11 @@ run: $(STAMP)
 kernels: $(STAMP)
 	$(PY) -c "from controller.warmup import warm_up; warm_up()"
 
-# One xdist worker more than there are cores: many tests wait on real-time peers (PX4 test peers, browsers,
+# Two xdist workers more than there are cores: many tests wait on real-time peers (PX4 test peers, browsers,
 # spawned agents) with the CPU idle, e.g. the PX4 link tests take 69 s of wall time for 5 s of CPU. Measured on
-# 2 cores: 560-583 s with 3 workers against 605-648 s with 2.
-WORKERS := $(shell echo $$(( $$(nproc) + 1 )))
+# 2 cores with the safety sample's whole flights (2026-12-02): 425 s on 4 workers, the CPU busy to the last
+# minute, against 529 s on 3 (147 % of 200 % CPU); earlier, 560-583 s with 3 workers against 605-648 s with 2.
+WORKERS := $(shell echo $$(( $$(nproc) + 2 )))
 
 # Three passes, all always run: the suite without the browser on the workers; then the browser tests on two
 # workers, away from the suite's simulations and experiment pools (beside them a software-rendered page starved
