@@ -115,18 +115,24 @@ class TrackerStats:
 
 
 @numba.njit(cache=True)
-def _transition_into(b, dt_s, tau_s, psd, F, Q):  # pragma: no cover - compiled
-    """Write F (6, 6) and Q (6, 6) of the decaying-velocity model over dt_s into F = I and Q = 0, for
-    b = exp(-dt_s / tau_s) and psd (3,) the velocity noise densities (module docstring). One compiled call:
-    every detection at a new stamp asks for a new pair."""
+def _coefficients(b, dt_s, tau_s):  # pragma: no cover - compiled
+    """(f_pv, q_pp, q_pv, q_vv) of the decaying-velocity model over dt_s for b = exp(-dt_s / tau_s):
+    F = [[I, f_pv I], [0, b I]], Q = [[q_pp D, q_pv D], [q_pv D, q_vv D]] with D = diag(psd)."""
     one_b, one_b2 = 1.0 - b, 1.0 - b * b
-    f_pv = tau_s * one_b
     q_pp = tau_s * tau_s * (dt_s - 2.0 * tau_s * one_b + 0.5 * tau_s * one_b2)
     q_pv = tau_s * tau_s * (one_b - 0.5 * one_b2)
-    q_vv = 0.5 * tau_s * one_b2
+    return tau_s * one_b, q_pp, q_pv, 0.5 * tau_s * one_b2
+
+
+@numba.njit(cache=True)
+def _transition_into(b, dt_s, tau_s, psd, F, Q):  # pragma: no cover - compiled
+    """Write F (6, 6) and Q (6, 6) over dt_s (`_coefficients`) into F = I and Q = 0, psd (3,) the velocity
+    noise densities. One compiled call: every detection at a new stamp asks for a new pair."""
+    f_pv, q_pp, q_pv, q_vv = _coefficients(b, dt_s, tau_s)
+    f_vv = 1.0 - (1.0 - b)  # not b: the bits of I - (1 - b) I that the tracker's filter always got
     for a in range(3):
         F[a, 3 + a] = f_pv
-        F[3 + a, 3 + a] = 1.0 - one_b
+        F[3 + a, 3 + a] = f_vv
         Q[a, a] = q_pp * psd[a]
         Q[a, 3 + a] = q_pv * psd[a]
         Q[3 + a, a] = q_pv * psd[a]
@@ -134,6 +140,7 @@ def _transition_into(b, dt_s, tau_s, psd, F, Q):  # pragma: no cover - compiled
 
 
 def _transition(dt_s: float, tau_s: float, psd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F (6, 6), Q (6, 6)) over dt_s; psd (3,) the velocity noise densities."""
     F, Q = np.eye(6), np.zeros((6, 6))
     _transition_into(float(np.exp(-dt_s / tau_s)), dt_s, tau_s, psd, F, Q)
     return F, Q
@@ -144,11 +151,7 @@ def _predicted(dt_s, tau_s, psd, x, p, x_out, p_out):  # pragma: no cover - comp
     """x_out (6,) = F x, p_out (6, 6) = sym(F P F^T + Q) for F, Q of `_transition` over dt_s: what
     `estimate` hands out every tick, in one compiled call. Only filterpy ever moves the filter itself."""
     b = math.exp(-dt_s / tau_s)
-    one_b, one_b2 = 1.0 - b, 1.0 - b * b
-    f_pv = tau_s * one_b  # F = [[I, f_pv I], [0, b I]]
-    q_pp = tau_s * tau_s * (dt_s - 2.0 * tau_s * one_b + 0.5 * tau_s * one_b2)
-    q_pv = tau_s * tau_s * (one_b - 0.5 * one_b2)
-    q_vv = 0.5 * tau_s * one_b2
+    f_pv, q_pp, q_pv, q_vv = _coefficients(b, dt_s, tau_s)
     fp = np.empty((6, 6))  # F P
     for i in range(3):
         x_out[i] = x[i, 0] + f_pv * x[3 + i, 0]

@@ -136,6 +136,20 @@ def test_own_absurd_and_older_plans_are_not_stored():
     assert table.plans() == (newer,)
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -2.0e6])
+def test_a_plan_with_a_non_finite_or_wild_position_is_refused_and_nothing_is_stored(bad):
+    rng = np.random.default_rng(4)
+    good = plan(rng, 4, 1.0)
+    positions = good.positions_m.copy()
+    positions[-1, 2] = bad
+    table = TeammateTable(own_id=3, plan_length=17)
+    wild = HorizonPlan(
+        vehicle_id=4, stamp_s=1.0, dt_s=0.1, positions_m=positions, velocities_mps=good.velocities_mps
+    )
+    assert table.update(wild) == "refused"
+    assert table.count == 0 and table.plans() == ()
+
+
 def test_fresh_count_and_ids_count_in_formation_plans_only():
     rng = np.random.default_rng(3)
     table = TeammateTable(own_id=0, plan_length=17)
