@@ -137,15 +137,23 @@ def test_operator_page_drives_the_agents_and_shows_their_acknowledgements(spawne
         frame = opened.operator
         expect(frame.get_by_text("agent ok", exact=False).first).to_be_visible()  # the Team tab's detail
         target = spawned.agents.fleet.formation.d_des_m - 1.0
+        earlier = max(
+            (c[0] for v in spawned.station.snapshot().vehicles if v.agent for c in v.agent.commands),
+            default=-1,
+        )
         open_tab(frame, "Formation")
         box = number_input(frame, "d_des (m)")
         box.fill(f"{target:g}")
         box.press("Enter")
+        # The page's change reaches the station over its WebSocket, later than the key press returns; the
+        # agents' acknowledgements of the start-up configuration (commands up to `earlier`) do not count.
         deadline = time.monotonic() + 20.0
         while True:
             vehicles = spawned.station.snapshot().vehicles
             outcomes = [v.agent.commands[-1] for v in vehicles if v.agent is not None and v.agent.commands]
-            if len(outcomes) == VEHICLES and all(c[1] == "configure" and c[2] == "acked" for c in outcomes):
+            if len(outcomes) == VEHICLES and all(
+                c[0] > earlier and c[1] == "configure" and c[2] == "acked" for c in outcomes
+            ):
                 break
             assert time.monotonic() < deadline, f"the agents did not acknowledge the new d_des: {outcomes}"
             time.sleep(0.1)
