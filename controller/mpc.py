@@ -46,7 +46,7 @@ from controller.mpc_kernels import (
     rollout,
     solve_fast,
 )
-from controller.qp import ExactQp
+from controller.qp import ACTIVE_SET_SOLVERS, ExactQp
 
 EFFORT_MODES = ("hover", "planned", "raw")
 SOLVERS = ("exact", "osqp")
@@ -75,6 +75,8 @@ class MpcParams:
     re-rolled through the exact dynamics with inputs clipped into their box, so it is consistent and
     admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
     solution, non-convex) is a failure.
+    active_set: the exact solver's active-set step, "daqp" (the default) or "compiled" (one compiled dual
+    active-set solve; controller/qp.py, docs/fast-core.md says how they compare).
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
     plan_acceleration_min_mps2, plan_acceleration_max_mps2: bounds per axis on u(n) + f(n) (before gravity,
     like the input box), the acceleration the plan asks of the vehicle with the fields included
@@ -98,6 +100,7 @@ class MpcParams:
     terminal_velocity_weight: float = 100.0
     effort: str = "hover"
     solver: str = "exact"
+    active_set: str = "daqp"
     slack_weight: float = 1.0e4
     slack_quadratic_weight: float = 5.0e3
     eps_abs: float = 1.0e-5
@@ -120,6 +123,8 @@ class MpcParams:
             raise ValueError(f"effort must be one of {EFFORT_MODES}, got {self.effort!r}")
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
+        if self.active_set not in ACTIVE_SET_SOLVERS:
+            raise ValueError(f"active_set must be one of {ACTIVE_SET_SOLVERS}, got {self.active_set!r}")
         bounds = [
             ("position", self.position_min_m, self.position_max_m),
             ("velocity", self.velocity_min_mps, self.velocity_max_mps),
@@ -375,6 +380,7 @@ class ModelPredictiveController:
         self._state_max_c = np.ascontiguousarray(self._state_max)
         self._effort_code = EFFORT_MODES.index(params.effort)
         self._work: tuple | None = None  # _solve_exact's work arrays
+        self._fallbacks = 0
         self._default_w_terminal = np.diag(
             [params.terminal_position_weight] * 3 + [params.terminal_velocity_weight] * 3
         )
@@ -387,6 +393,12 @@ class ModelPredictiveController:
     @property
     def params(self) -> MpcParams:
         return self._params
+
+    @property
+    def active_set_fallbacks(self) -> int:
+        """Solves whose compiled active-set step did not end optimal (infeasible rows, its iteration limit),
+        so that DAQP's path answered them (0 unless `MpcParams.active_set` is "compiled")."""
+        return self._fallbacks
 
     def reset(self) -> None:
         """Forget the warm start and OSQP's adapted step size: the next solve is like a fresh controller's."""
@@ -486,7 +498,13 @@ class ModelPredictiveController:
         p[self._p_rows, self._p_cols] = self._p_data(w_terminal)
         p = p + np.triu(p, 1).T
         p[self._n_var :, self._n_var :] = self._slack_hessian
-        return ExactQp(p, self._a_exact, self._resting, iteration_limit=self._params.max_iterations)
+        return ExactQp(
+            p,
+            self._a_exact,
+            self._resting,
+            iteration_limit=self._params.max_iterations,
+            active_set=self._params.active_set,
+        )
 
     def _setup_solver(self) -> None:
         prm = self._params
@@ -706,6 +724,7 @@ class ModelPredictiveController:
         path, iterations, time_s = "closed_form", 0, 0.0
         if verdict != CLOSED_FORM:
             result = qp.finish(q, lo, hi, fixed_rows_ok, z, rows, gradient, *extra)
+            self._fallbacks += result.fallback
             if not result.ok:
                 message = f"exact QP: {result.status} ({result.message})"
                 return self._failure(

@@ -27,6 +27,9 @@ exact:
    keep their step 1-2 optimum) and leaves at 0 the resting variables no row in play reaches; it hands DAQP
    the problem in y = L^T z (P = L L^T, factored once), whose Hessian is the identity. DAQP's set-up, which
    grows with the rows and variables and must factor a general Hessian, was most of the cost here.
+   With `active_set="compiled"` step 3 is instead one call of controller/dual_active_set.py on the whole
+   problem (every row, every variable, the same y = L^T z); DAQP's rounds answer only what it does not
+   solve to optimality.
 
 Resting variables must each have a fixed row that bounds them below by exactly 0 and nothing else (`rest`
 rows), so step 1's dual check is the whole KKT story. Shapes: n variables, m0 fixed rows, m1 extra rows.
@@ -39,6 +42,8 @@ from dataclasses import dataclass
 import daqp
 import numba
 import numpy as np
+
+from controller.dual_active_set import OPTIMAL, solve_identity_qp
 
 DAQP_INF = 1.0e30  # DAQP's own "no bound"
 
@@ -58,6 +63,7 @@ def _daqp_solve(
     return np.asarray(x, dtype=float), int(flag), int(info["iterations"]), float(info["solve_time"])
 
 
+ACTIVE_SET_SOLVERS = ("daqp", "compiled")
 STATUSES = ("solved", "infeasible", "failed")
 PATHS = ("closed_form", "blocks", "active_set")
 
@@ -76,6 +82,7 @@ class QpResult:
     iterations: int
     message: str | None = None
     solve_time_s: float = 0.0  # DAQP's own reported time; 0 for the closed form (no clock is read here)
+    fallback: bool = False  # the compiled active set did not end optimal, and DAQP's path answered
 
     @property
     def ok(self) -> bool:
@@ -184,6 +191,9 @@ class ExactQp:
     resting: (n,) bool, the variables held at 0 by the closed form (each needs a fixed row 0 <= z_i, alone).
     feasibility_tol: how far (in the rows' units) a row may be violated and still count as satisfied; also
     DAQP's primal tolerance. optimality_tol: how negative a resting variable's gradient may be.
+    active_set: step 3's solver, "daqp" (the working set of rows above) or "compiled"
+    (controller/dual_active_set.py: the whole problem in one compiled call, DAQP's path as its fallback
+    when it does not end optimal or P is singular).
     """
 
     def __init__(
@@ -195,7 +205,10 @@ class ExactQp:
         feasibility_tol: float = 1.0e-9,
         optimality_tol: float = 1.0e-9,
         iteration_limit: int = 1000,
+        active_set: str = "daqp",
     ) -> None:
+        if active_set not in ACTIVE_SET_SOLVERS:
+            raise ValueError(f"active_set must be one of {ACTIVE_SET_SOLVERS}, got {active_set!r}")
         p = np.array(p, dtype=float)
         a = np.array(a, dtype=float)
         resting = np.asarray(resting, dtype=bool)
@@ -263,6 +276,14 @@ class ExactQp:
         except np.linalg.LinAlgError:
             self._w = None
         self._w_sub: dict[bytes, np.ndarray] = {}  # W restricted to a round's variables, by their mask
+        self._compiled = active_set == "compiled" and self._w is not None
+        # the compiled solver's own W: upper triangular exactly (its loops skip the lower part), row-major
+        self._w_upper = np.ascontiguousarray(np.triu(self._w)) if self._w is not None else None
+        self._iteration_limit = int(iteration_limit)
+        # The compiled solver starts with the separable resting variables at 0, their rows active.
+        starts = self._separable_rest[self._rest_row_var]
+        self._start_rows = self._rest_rows[starts].astype(np.int64)
+        self._start_vars = self._rest_row_var[starts].astype(np.int64)
 
     @property
     def block_count(self) -> int:
@@ -362,6 +383,12 @@ class ExactQp:
         if not extra:
             extra_a, extra_lo, extra_hi = np.zeros((0, self.n)), np.zeros(0), np.zeros(0)
         assert extra_a is not None and extra_lo is not None and extra_hi is not None
+        fallback = False
+        if self._compiled:
+            result = self._solve_compiled(q, lo, hi, extra_a, extra_lo, extra_hi, iterations)
+            if result is not None:
+                return result
+            fallback = True
         lo_all = np.maximum(np.concatenate([lo, extra_lo]), -DAQP_INF)
         hi_all = np.minimum(np.concatenate([hi, extra_hi]), DAQP_INF)
         keep = np.zeros(lo_all.shape[0], dtype=bool)
@@ -382,8 +409,8 @@ class ExactQp:
             x_sub, flag, its, t_s = self._solve_relaxation(variables, q, a_sub, lo_all[kept], hi_all[kept])
             iterations += its
             time_s += t_s
-            if flag < 0:
-                return self._failed(flag, iterations)  # a relaxation without a solution: nor has the whole
+            if flag < 0:  # a relaxation without a solution: nor has the whole
+                return self._failed(flag, iterations, fallback=fallback)
             x = x.copy()
             x[variables] = x_sub
             x[idle] = 0.0
@@ -394,7 +421,43 @@ class ExactQp:
             path="active_set",
             iterations=iterations,
             solve_time_s=time_s,
+            fallback=fallback,
         )
+
+    def _solve_compiled(
+        self,
+        q: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        extra_a: np.ndarray,
+        extra_lo: np.ndarray,
+        extra_hi: np.ndarray,
+        iterations: int,
+    ) -> QpResult | None:
+        """Step 3 by `solve_identity_qp` on every row; None (DAQP's path then runs) unless it ends
+        optimal, so an infeasible verdict or the iteration limit is always confirmed by DAQP."""
+        assert self._w_upper is not None
+        x = np.empty(self.n)
+        multipliers = np.empty(self.n + 1)
+        active = np.empty(self.n + 1, dtype=np.int64)
+        flag, _, its = solve_identity_qp(
+            self._w_upper,
+            q,
+            *self._a_csr,
+            np.ascontiguousarray(extra_a, dtype=float),
+            np.concatenate([lo, extra_lo]),
+            np.concatenate([hi, extra_hi]),
+            self._start_rows,
+            self._start_vars,
+            self._tol,
+            self._iteration_limit,
+            x,
+            multipliers,
+            active,
+        )
+        if flag != OPTIMAL:
+            return None
+        return QpResult(x=x, status="solved", path="active_set", iterations=iterations + its)
 
     def _missed(self, values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """(m,) bool: which row values (m,) lie outside lo, hi (m,) by more than the feasibility tolerance."""
@@ -449,7 +512,7 @@ class ExactQp:
         keep_fixed[self._rest_rows] = variables[self._rest_row_var]
         return variables, np.concatenate([keep_fixed, keep_extra]), idle
 
-    def _failed(self, flag: int, iterations: int) -> QpResult:
+    def _failed(self, flag: int, iterations: int, *, fallback: bool = False) -> QpResult:
         status = "infeasible" if flag == -1 else "failed"
         return QpResult(
             x=np.full(self.n, np.nan),
@@ -457,4 +520,5 @@ class ExactQp:
             path="active_set",
             iterations=iterations,
             message=f"DAQP exit flag {flag}",
+            fallback=fallback,
         )

@@ -15,14 +15,15 @@ from controller.formation import FormationController
 from controller.messages import Detection, HorizonPlan, Obstacle, PersonEstimate, VehicleState
 from controller.mpc import ModelPredictiveController
 from controller.params import ControllerParams, FormationParams
+from controller.qp import ExactQp
 from controller.teammates import TeammateTable
 from controller.tracker import PersonTracker
 
 
 def warm_up(params: ControllerParams | None = None) -> None:
     """One tracker update and estimate, formation-controller steps with a teammate's plan from the plan table
-    and an obstacle within reach, and an MPC solve with an active bound (the active-set path), so every
-    kernel on the tick's path has run once."""
+    and an obstacle within reach, an MPC solve with an active bound (the active-set path), and a QP whose
+    coupling rows need the compiled active-set step, so every kernel on the tick's path has run once."""
     params = params or ControllerParams()
     tracker = PersonTracker(params.tracker)
     for stamp in (0.0, 0.02):  # the second predicts (the transition kernel) before it updates
@@ -62,4 +63,13 @@ def warm_up(params: ControllerParams | None = None) -> None:
         target_position_m=np.array([60.0, 0.0, 6.0]),
         target_velocity_mps=np.zeros(3),
         external_inputs_mps2=np.zeros((steps - 1, 3)),
+    )
+    # min |x - (10, 10)|^2 / 2 with y <= 0 and x - y <= 5 as coupling rows: step 3, by the compiled solver
+    ExactQp(np.eye(2), np.eye(2), np.zeros(2, dtype=bool), active_set="compiled").solve(
+        np.array([-10.0, -10.0]),
+        np.full(2, -100.0),
+        np.full(2, 100.0),
+        np.array([[0.0, 1.0], [1.0, -1.0]]),
+        np.full(2, -np.inf),
+        np.array([0.0, 5.0]),
     )

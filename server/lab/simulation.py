@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.params import ParameterError
+from controller.params import ControllerParams, ParameterError
 from server.lab.metrics import WARMUP_EPS_S, Recorder, TickSample
 from server.settings import RunSettings, real_number
 from vehicles.mission import MissionSnapshot, Phase, VehicleSnapshot
@@ -102,13 +102,19 @@ def _believed(vehicle: VehicleSnapshot, autopilot: SimAutopilot) -> np.ndarray:
     return np.asarray(believed if believed is not None else autopilot.true_position_m, dtype=float)
 
 
-def run_simulation(config: SimConfig, *, progress: Callable[[float], None] | None = None) -> SimReport:
+def run_simulation(
+    config: SimConfig,
+    *,
+    progress: Callable[[float], None] | None = None,
+    controller_params: ControllerParams | None = None,
+) -> SimReport:
     """Run `config` headless and return its report. progress(t_s), if given, is called about once a
-    simulated second."""
+    simulated second; controller_params (default: the method's) is for benchmarks that compare solvers."""
     setup = build_sim(
         config.scenario(),
         clock=time.perf_counter,
         agent_params=config.agent_params,
+        controller_params=controller_params,
     )
     mission, world = setup.mission, setup.world
     ids = mission.vehicle_ids

@@ -97,12 +97,14 @@ GENERIC = [(seed, coupled) for seed in range(30) for coupled in (False, True)]
 
 @pytest.fixture(scope="module")
 def generic_results():
-    """(path, exact x, OSQP x, CVXPY x) for 60 generic soft-row problems, half with coupling rows."""
+    """(path, exact x, OSQP x, CVXPY x, x with the compiled active-set step) for 60 generic soft-row problems,
+    half with coupling rows."""
     out = []
     for seed, coupled in GENERIC:
         p, q, a, lo, hi, resting, extra = soft_block_problem(np.random.default_rng(seed), coupled=coupled)
         result = ExactQp(p, a, resting).solve(q, lo, hi, *(extra or ()))
-        assert result.ok
+        compiled = ExactQp(p, a, resting, active_set="compiled").solve(q, lo, hi, *(extra or ()))
+        assert result.ok and compiled.ok and compiled.path == result.path
         a_all, lo_all, hi_all = a, lo, hi
         if extra is not None:
             a_all = np.vstack([a, extra[0]])
@@ -113,17 +115,22 @@ def generic_results():
                 result.x,
                 osqp_reference(p, q, a_all, lo_all, hi_all),
                 cvxpy_qp_reference(p, q, a_all, lo_all, hi_all),
+                compiled.x,
             )
         )
     return out
 
 
 def test_generic_problems_match_osqp(generic_results):
-    assert max(np.max(np.abs(x - ref)) for _, x, ref, _ in generic_results) < TOL
+    assert max(np.max(np.abs(x - ref)) for _, x, ref, _, _ in generic_results) < TOL
 
 
 def test_generic_problems_match_cvxpy(generic_results):
-    assert max(np.max(np.abs(x - ref)) for _, x, _, ref in generic_results) < TOL
+    assert max(np.max(np.abs(x - ref)) for _, x, _, ref, _ in generic_results) < TOL
+
+
+def test_generic_problems_by_the_compiled_active_set_match_cvxpy(generic_results):
+    assert max(np.max(np.abs(x - ref)) for _, _, _, ref, x in generic_results) < TOL
 
 
 def test_generic_problems_take_every_path(generic_results):
@@ -155,13 +162,15 @@ def test_rows_reaching_two_blocks_leave_the_third_at_its_own_optimum():
     assert active >= 20
 
 
-def test_resting_variables_without_quadratic_cost_still_solve_exactly():
+@pytest.mark.parametrize("active_set", ["daqp", "compiled"])
+def test_resting_variables_without_quadratic_cost_still_solve_exactly(active_set):
     """Slacks with a linear penalty only (P singular there): the active set works on P itself instead of
-    its Cholesky factor, with the same minimiser."""
+    its Cholesky factor (the compiled step, which needs the factor, leaves it to DAQP), with the same
+    minimiser."""
     p, q, a, lo, hi, resting, extra = soft_block_problem(np.random.default_rng(3), coupled=True)
     assert extra is not None
     p[18:, 18:] = 0.0
-    result = ExactQp(p, a, resting).solve(q, lo, hi, *extra)
+    result = ExactQp(p, a, resting, active_set=active_set).solve(q, lo, hi, *extra)
     assert result.ok and result.path == "active_set"
     np.testing.assert_allclose(result.x, cvxpy_qp_reference(p, q, *_with_extra(a, lo, hi, extra)), atol=TOL)
 
@@ -245,10 +254,12 @@ REFERENCE = MpcParams(solver="osqp", eps_abs=1e-11, eps_rel=1e-11, max_iteration
 @pytest.fixture(scope="module")
 def mpc_results():
     """200 MPC instances of every kind (active state bounds, saturated inputs, huge forces, coupled terminal
-    weights), solved in sequence by one exact controller, one tight OSQP controller and CVXPY + Clarabel."""
+    weights), solved in sequence by one exact controller, one tight OSQP controller, CVXPY + Clarabel and an
+    exact controller with the compiled active-set step (which none of them may hand to DAQP)."""
     rng = np.random.default_rng(20261128)
     exact = ModelPredictiveController(MpcParams())
     reference = ModelPredictiveController(REFERENCE)
+    compiled = ModelPredictiveController(MpcParams(active_set="compiled"))
     out = []
     for i in range(MPC_CASES):
         if i % 4 == 3:
@@ -262,42 +273,52 @@ def mpc_results():
             "terminal_position_weight": case.get("terminal_position_weight", 100.0 * np.eye(3)),
             "terminal_velocity_weight": case.get("terminal_velocity_weight", 100.0 * np.eye(3)),
         }
-        out.append((ours, ref, cvxpy_mpc_reference(MpcParams(), {**case, **weights})))
+        cvx = cvxpy_mpc_reference(MpcParams(), {**case, **weights})
+        out.append((ours, ref, cvx, compiled.solve(**case)))
+    assert compiled.active_set_fallbacks == 0
     return out
 
 
 @pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_inputs_match_osqp(mpc_results):
-    assert all(ours.ok and ref.ok for ours, ref, _ in mpc_results)
-    assert max(np.max(np.abs(ours.inputs_mps2 - ref.inputs_mps2)) for ours, ref, _ in mpc_results) < TOL
+    assert all(ours.ok and ref.ok for ours, ref, _, _ in mpc_results)
+    assert max(np.max(np.abs(ours.inputs_mps2 - ref.inputs_mps2)) for ours, ref, _, _ in mpc_results) < TOL
 
 
 @pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_inputs_match_cvxpy(mpc_results):
-    assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, _, cvx in mpc_results) < TOL
+    assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, _, cvx, _ in mpc_results) < TOL
 
 
 @pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_plan_matches_cvxpy(mpc_results):
     errors = [
         max(np.max(np.abs(ours.positions_m - cvx[1])), np.max(np.abs(ours.velocities_mps - cvx[2])))
-        for ours, _, cvx in mpc_results
+        for ours, _, cvx, _ in mpc_results
     ]
     assert max(errors) < TOL
+
+
+@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
+def test_mpc_compiled_active_set_matches_cvxpy(mpc_results):
+    """The compiled active-set step: the same inputs and plan as CVXPY's, by the same solver path."""
+    assert all(comp.ok and comp.path == ours.path for ours, _, _, comp in mpc_results)
+    assert max(np.max(np.abs(comp.inputs_mps2 - cvx[0])) for _, _, cvx, comp in mpc_results) < TOL
+    assert max(np.max(np.abs(comp.positions_m - cvx[1])) for _, _, cvx, comp in mpc_results) < TOL
 
 
 @pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_instances_are_mostly_constrained(mpc_results):
     """At least half of the 200 need the active-set solver (a bound or a saturated input is active); the
     flight-like ones mostly do not."""
-    paths = [ours.path for ours, _, _ in mpc_results]
+    paths = [ours.path for ours, _, _, _ in mpc_results]
     assert paths.count("closed_form") >= 25
     assert len(paths) - paths.count("closed_form") >= MPC_CASES // 2
 
 
 @pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
 def test_mpc_exact_reports_the_same_violation_as_osqp(mpc_results):
-    for ours, ref, _ in mpc_results:
+    for ours, ref, _, _ in mpc_results:
         assert ours.max_state_violation == pytest.approx(ref.max_state_violation, abs=1e-6)
 
 
@@ -328,6 +349,7 @@ def half_plane_results():
     rng = np.random.default_rng(515)
     controller = ModelPredictiveController(MpcParams())
     reference = ModelPredictiveController(REFERENCE)
+    compiled = ModelPredictiveController(MpcParams(active_set="compiled"))
     out = []
     for _ in range(30):
         case = flight_case(rng)
@@ -339,23 +361,32 @@ def half_plane_results():
                 cvxpy_mpc_reference(MpcParams(), _with_weights(case), planes),
                 planes,
                 reference.solve(**case, half_planes=planes),
+                compiled.solve(**case, half_planes=planes),
             )
         )
+    assert compiled.active_set_fallbacks == 0
     return out
 
 
 def test_half_planes_match_cvxpy(half_plane_results):
-    assert all(ours.ok for ours, _, _, _ in half_plane_results)
-    assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, cvx, _, _ in half_plane_results) < TOL
+    assert all(ours.ok for ours, _, _, _, _ in half_plane_results)
+    assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, cvx, _, _, _ in half_plane_results) < TOL
+
+
+def test_half_planes_by_the_compiled_active_set_match_cvxpy(half_plane_results):
+    assert all(comp.ok for *_, comp in half_plane_results)
+    assert max(np.max(np.abs(comp.inputs_mps2 - cvx[0])) for _, cvx, _, _, comp in half_plane_results) < TOL
+    for ours, _, _, _, comp in half_plane_results:
+        assert comp.half_plane_violation_m == pytest.approx(ours.half_plane_violation_m, abs=1e-6)
 
 
 def test_half_planes_match_osqp(half_plane_results):
-    assert all(ref.ok for _, _, _, ref in half_plane_results)
+    assert all(ref.ok for _, _, _, ref, _ in half_plane_results)
     assert (
-        max(np.max(np.abs(ours.inputs_mps2 - ref.inputs_mps2)) for ours, _, _, ref in half_plane_results)
+        max(np.max(np.abs(ours.inputs_mps2 - ref.inputs_mps2)) for ours, _, _, ref, _ in half_plane_results)
         < TOL
     )
-    for ours, _, _, ref in half_plane_results:
+    for ours, _, _, ref, _ in half_plane_results:
         assert ours.half_plane_violation_m == pytest.approx(ref.half_plane_violation_m, abs=1e-6)
 
 
@@ -363,10 +394,10 @@ def test_half_planes_that_can_hold_are_held(half_plane_results):
     """A single late cut of at most 0.3 m into a free plan can be met within the input box: no violation is
     left. (Several cuts in different directions at nearby steps may contradict each other; those are only
     compared with CVXPY.) Every solve needed the active-set solver: the closed form violated the cuts."""
-    single = [ours for ours, _, planes, _ in half_plane_results if len(planes.steps) == 1]
+    single = [ours for ours, _, planes, _, _ in half_plane_results if len(planes.steps) == 1]
     assert len(single) >= 5
     assert all(ours.half_plane_violation_m == 0.0 for ours in single)
-    assert all(ours.path == "active_set" for ours, _, _, _ in half_plane_results)
+    assert all(ours.path == "active_set" for ours, _, _, _, _ in half_plane_results)
 
 
 def test_contradictory_half_planes_give_way_without_failing():
@@ -423,34 +454,39 @@ def _separation_planes(plan_positions: np.ndarray, turn: float, soft: bool, tilt
 def test_separation_planes_on_every_step_match_osqp(soft, tilt):
     """20 flight-like instances whose free plan crosses a plane held on every step (vertical, or tilted so
     climbing helps) and a second one on the late steps (the shape of separation constraints: teammates'
-    cells, trunks), hard or soft: the exact solver's inputs equal tight OSQP's on the same problem to 1e-6,
+    cells, trunks), hard or soft: the exact solver's inputs (either active-set step) equal tight OSQP's on
+    the same problem to 1e-6,
     and so does the planes' remaining violation; hard planes either hold exactly or both solvers call the
     problem infeasible."""
     rng = np.random.default_rng(77 + soft + int(10 * tilt))
     exact, reference = ModelPredictiveController(MpcParams()), ModelPredictiveController(REFERENCE)
+    compiled = ModelPredictiveController(MpcParams(active_set="compiled"))
     solved = 0
     for _ in range(20):
         case = flight_case(rng)
         planes = _separation_planes(exact.solve(**case).positions_m, rng.uniform(-0.6, 0.6), soft, tilt)
         ours, ref = exact.solve(**case, half_planes=planes), reference.solve(**case, half_planes=planes)
-        assert ours.ok == ref.ok
+        comp = compiled.solve(**case, half_planes=planes)
+        assert ours.ok == ref.ok == comp.ok
         if ours.ok:
             assert ours.path != "closed_form"
             np.testing.assert_allclose(ours.inputs_mps2, ref.inputs_mps2, rtol=0, atol=TOL)
+            np.testing.assert_allclose(comp.inputs_mps2, ref.inputs_mps2, rtol=0, atol=TOL)
             assert ours.half_plane_violation_m == pytest.approx(ref.half_plane_violation_m, abs=1e-6)
             solved += 1
             if not soft:
                 assert ours.half_plane_violation_m == 0.0
         else:
-            assert (ours.status, ref.status) == ("infeasible", "primal infeasible")
+            assert (ours.status, ref.status, comp.status) == ("infeasible", "primal infeasible", "infeasible")
+    assert compiled.active_set_fallbacks == 20 - solved  # only an infeasible problem goes to DAQP
     assert solved >= 15  # most can hold (the MAV starts inside its cell); the rest are compared as failures
 
 
-def squeezed_at_step_5(soft: np.ndarray | None = None):
+def squeezed_at_step_5(soft: np.ndarray | None = None, active_set: str = "daqp"):
     """(case, controller, x, planes): a flight case, x(5) of its free plan, and two rows of step 5 with 0.2 m
     of gap around it, x(5) >= x + 0.1 and x(5) <= x - 0.1 (each alone can hold)."""
     case = flight_case(np.random.default_rng(3))
-    controller = ModelPredictiveController(MpcParams())
+    controller = ModelPredictiveController(MpcParams(active_set=active_set))
     x = controller.solve(**case).positions_m[5, 0]
     planes = HalfPlanes(
         steps=np.array([5, 5]),
@@ -461,16 +497,18 @@ def squeezed_at_step_5(soft: np.ndarray | None = None):
     return case, controller, x, planes
 
 
-def test_hard_half_planes_that_cannot_hold_fail_the_solve():
+@pytest.mark.parametrize("active_set", ["daqp", "compiled"])
+def test_hard_half_planes_that_cannot_hold_fail_the_solve(active_set):
     """Hard rows have no slack: contradictory ones make the QP infeasible, reported as such (the caller
     brakes or escapes); with one of them soft, that one gives way."""
-    case, controller, x, planes = squeezed_at_step_5(soft=np.array([True, False]))
+    case, controller, x, planes = squeezed_at_step_5(soft=np.array([True, False]), active_set=active_set)
     mixed = controller.solve(**case, half_planes=planes)
     assert mixed.ok and mixed.half_plane_violation_m == pytest.approx(0.2, abs=1e-3)
     assert mixed.positions_m[5, 0] == pytest.approx(x - 0.1, abs=1e-6)  # the hard row holds exactly
     hard = HalfPlanes(planes.steps, planes.normals_xy, planes.offsets, soft=np.array([False, False]))
     sol = controller.solve(**case, half_planes=hard)
     assert not sol.ok and sol.status == "infeasible"
+    assert controller.active_set_fallbacks == (active_set == "compiled")  # DAQP confirms the verdict
     assert controller.solve(**case).ok  # and the next solve without them is unaffected
 
 

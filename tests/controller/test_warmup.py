@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from controller import fields_kernel, mpc_kernels, teammates, tracker
+from controller import dual_active_set, fields_kernel, mpc_kernels, teammates, tracker
 from controller.warmup import warm_up
 
 
@@ -15,5 +15,6 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         mpc_kernels.half_plane_rows,
         teammates.align_rows,
         tracker._predicted,
+        dual_active_set.solve_identity_qp,
     )
     assert all(kernel.signatures for kernel in kernels)

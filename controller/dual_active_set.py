@@ -1,0 +1,270 @@
+"""A compiled dual active-set solver (Goldfarb and Idnani, 1983) for QPs whose Hessian is the identity.
+
+    minimise   |y|^2 / 2 + c^T y     subject to   lo <= A W y <= hi
+
+with the rows given in the original variables z = W y (W = L^-T for P = L L^T, c = W^T q), so this is
+min z^T P z / 2 + q^T z, lo <= A z <= hi. controller/qp.py hands it step 3's whole problem in one call
+(`MpcParams.active_set = "compiled"`), where DAQP needs a working set of rows, a set-up per round and a dozen
+numpy calls around each.
+
+The method: start at the unconstrained optimum y = -c and repeatedly take the most violated row into the
+active set, moving y and the active rows' multipliers u along the directions that keep the active rows
+tight and u >= 0, and dropping an active row whose multiplier reaches 0 on the way. Every iterate is the
+optimum of the problem with its active rows as equalities (dual feasible); the first that violates no row
+is the optimum. The active normals N are kept as N = J[:, :k] R (J orthogonal (n, n), R upper triangular
+(k, k)), updated by Givens rotations, so each iteration costs O(n^2) and no system is solved from scratch.
+
+Rows are read in place, the fixed ones as CSR, the per-solve (extra) ones dense: a row's value is a^T z, and
+its normal in y, W^T a, is computed only for a row that enters the active set. The closed form's resting
+variables start in the active set at 0 (`solve_identity_qp`'s start rows), so a solve where only a few rows
+bind takes a few iterations. Exit flags: 1 optimal, -1 infeasible (a violated row whose normal the active
+normals span, with no active row to give way), -2 iteration limit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+OPTIMAL, INFEASIBLE, ITERATION_LIMIT = 1, -1, -2
+
+_DEPENDENT = 1.0e-12
+"""A row whose normal lies in the active normals' span to within this (relative) is linearly dependent."""
+
+
+@numba.njit(cache=True)
+def _row_values(a_ptr, a_idx, a_val, extra_a, z, values):  # pragma: no cover - compiled
+    """values (m0 + m1,) = the fixed rows (CSR) and the extra rows (m1, n) at z (n,)."""
+    m0 = a_ptr.shape[0] - 1
+    for r in range(m0):
+        s = 0.0
+        for k in range(a_ptr[r], a_ptr[r + 1]):
+            s += a_val[k] * z[a_idx[k]]
+        values[r] = s
+    for r in range(extra_a.shape[0]):
+        s = 0.0
+        for c in range(z.shape[0]):
+            s += extra_a[r, c] * z[c]
+        values[m0 + r] = s
+
+
+@numba.njit(cache=True)
+def _normal(a_ptr, a_idx, a_val, extra_a, w, row, sign, out):  # pragma: no cover - compiled
+    """out (n,) = sign * W^T a for row `row` (fixed rows first, then extra rows), W upper triangular."""
+    nf = w.shape[0]
+    out[:] = 0.0
+    m0 = a_ptr.shape[0] - 1
+    if row < m0:
+        for k in range(a_ptr[row], a_ptr[row + 1]):
+            c, v = a_idx[k], sign * a_val[k]
+            for i in range(c, nf):
+                out[i] += w[c, i] * v
+    else:
+        r = row - m0
+        for c in range(nf):
+            v = sign * extra_a[r, c]
+            if v != 0.0:
+                for i in range(c, nf):
+                    out[i] += w[c, i] * v
+
+
+@numba.njit(cache=True)
+def _rotate_columns(j_mat, a, b, cs, sn):  # pragma: no cover - compiled
+    """Columns a, b of J become cs J_a + sn J_b and -sn J_a + cs J_b."""
+    for i in range(j_mat.shape[0]):
+        x, y = j_mat[i, a], j_mat[i, b]
+        j_mat[i, a] = cs * x + sn * y
+        j_mat[i, b] = -sn * x + cs * y
+
+
+@numba.njit(cache=True)
+def _drop(j_mat, r_mat, u, active, k, l):  # pragma: no cover - compiled
+    """Remove active row l of k: shift R's columns, u and active left, restore R's triangle by rotations of
+    its rows (and the same rotations of J's columns). Returns k - 1."""
+    for c in range(l, k - 1):
+        for i in range(k):
+            r_mat[i, c] = r_mat[i, c + 1]
+        u[c] = u[c + 1]
+        active[c] = active[c + 1]
+    for i in range(k):
+        r_mat[i, k - 1] = 0.0
+    for j in range(l, k - 1):
+        x, y = r_mat[j, j], r_mat[j + 1, j]
+        h = math.hypot(x, y)
+        if h == 0.0:
+            continue
+        cs, sn = x / h, y / h
+        for c in range(j, k - 1):
+            p, q = r_mat[j, c], r_mat[j + 1, c]
+            r_mat[j, c] = cs * p + sn * q
+            r_mat[j + 1, c] = -sn * p + cs * q
+        r_mat[j + 1, j] = 0.0
+        _rotate_columns(j_mat, j, j + 1, cs, sn)
+    return k - 1
+
+
+@numba.njit(cache=True)
+def solve_identity_qp(
+    w,
+    q,
+    a_ptr,
+    a_idx,
+    a_val,
+    extra_a,
+    lo,
+    hi,
+    start_rows,
+    start_vars,
+    tol,
+    iteration_limit,
+    z,
+    multipliers,
+    active,
+):  # pragma: no cover - compiled
+    """Solve the module's QP for q (n,). w (n, n) is W (upper triangular); rows: fixed (CSR, m0 rows)
+    then extra (m1, n) dense; lo, hi (m0 + m1,) may be +-inf; tol is the rows' feasibility tolerance.
+
+    start_rows, start_vars (s,): fixed rows 0 <= a z_v (a > 0, nothing else in the row) of variables v that
+    neither P nor W couple to any other (so the row's normal in y is a W_vv e_v), taken as active from the
+    start with z_v = 0 where their multiplier c_v / (a W_vv) is >= 0: the closed form's resting variables,
+    which would otherwise each cost an iteration.
+
+    Writes z (n,) = W y, and for the k active rows multipliers (k,) >= 0 and active (k,) = 2 row + side
+    (side 0: the row's lower bound, 1: its upper one). Returns (flag, k, iterations)."""
+    nf = w.shape[0]
+    m = lo.shape[0]
+    c = np.empty(nf)  # W^T q
+    y = np.empty(nf)
+    for i in range(nf):
+        s = 0.0
+        for row in range(i + 1):  # W is upper triangular
+            s += w[row, i] * q[row]
+        c[i] = s
+        y[i] = -s
+    j_mat = np.zeros((nf, nf))
+    r_mat = np.zeros((nf, nf))
+    u = np.zeros(nf + 1)
+    act = np.zeros(nf + 1, dtype=np.int64)
+    in_set = np.zeros(2 * m, dtype=np.bool_)
+    values = np.empty(m)
+    normal = np.empty(nf)
+    d = np.empty(nf)
+    step = np.empty(nf)
+    r_dir = np.empty(nf)
+    taken = np.zeros(nf, dtype=np.bool_)
+    k = 0
+    for t in range(start_rows.shape[0]):
+        row, v = start_rows[t], start_vars[t]
+        coef = 0.0
+        for e in range(a_ptr[row], a_ptr[row + 1]):
+            coef += a_val[e]
+        diag = coef * w[v, v]
+        if lo[row] == 0.0 and diag > 0.0 and c[v] >= 0.0 and not taken[v]:
+            y[v] = 0.0
+            j_mat[v, k] = 1.0
+            r_mat[k, k] = diag
+            u[k] = c[v] / diag
+            act[k] = 2 * row
+            in_set[2 * row] = True
+            taken[v] = True
+            k += 1
+    col = k
+    for i in range(nf):
+        if not taken[i]:
+            j_mat[i, col] = 1.0
+            col += 1
+    iterations = 0
+    flag = ITERATION_LIMIT
+    while iterations < iteration_limit:
+        for i in range(nf):
+            s = 0.0
+            for col in range(i, nf):  # W is upper triangular
+                s += w[i, col] * y[col]
+            z[i] = s
+        _row_values(a_ptr, a_idx, a_val, extra_a, z, values)
+        worst, row, side = tol, -1, 0
+        for r in range(m):
+            if values[r] < lo[r] - worst and not in_set[2 * r]:
+                worst, row, side = lo[r] - values[r], r, 0
+            if values[r] > hi[r] + worst and not in_set[2 * r + 1]:
+                worst, row, side = values[r] - hi[r], r, 1
+        if row < 0:
+            flag = OPTIMAL
+            break
+        sign = 1.0 if side == 0 else -1.0
+        bound = lo[row] if side == 0 else -hi[row]
+        _normal(a_ptr, a_idx, a_val, extra_a, w, row, sign, normal)
+        norm2 = 0.0
+        for i in range(nf):
+            norm2 += normal[i] * normal[i]
+        u_new = 0.0
+        added = False
+        while iterations < iteration_limit and not added:
+            iterations += 1
+            for i in range(nf):  # d = J^T n
+                s = 0.0
+                for t in range(nf):
+                    s += j_mat[t, i] * normal[t]
+                d[i] = s
+            free2 = 0.0  # |d[k:]|^2 = n^T step
+            for i in range(k, nf):
+                free2 += d[i] * d[i]
+            for i in range(nf):  # the primal step direction J[:, k:] d[k:]
+                s = 0.0
+                for t in range(k, nf):
+                    s += j_mat[i, t] * d[t]
+                step[i] = s
+            for i in range(k - 1, -1, -1):  # the dual direction R^-1 d[:k]
+                s = d[i]
+                for t in range(i + 1, k):
+                    s -= r_mat[i, t] * r_dir[t]
+                r_dir[i] = s / r_mat[i, i]
+            t_primal = np.inf
+            if free2 > _DEPENDENT * _DEPENDENT * norm2:
+                slack = bound
+                for i in range(nf):
+                    slack -= normal[i] * y[i]
+                t_primal = max(slack, 0.0) / free2
+            t_dual, drop_at = np.inf, -1
+            for i in range(k):
+                if r_dir[i] > 0.0 and u[i] / r_dir[i] < t_dual:
+                    t_dual, drop_at = u[i] / r_dir[i], i
+            t = min(t_primal, t_dual)
+            if t == np.inf:
+                return INFEASIBLE, k, iterations
+            if t_primal < np.inf:
+                for i in range(nf):
+                    y[i] += t * step[i]
+            for i in range(k):
+                u[i] -= t * r_dir[i]
+            u_new += t
+            if t_primal <= t_dual:
+                for jj in range(nf - 1, k, -1):  # rotate d[k+1:] into d[k]
+                    x, yy = d[jj - 1], d[jj]
+                    h = math.hypot(x, yy)
+                    if h == 0.0:
+                        continue
+                    cs, sn = x / h, yy / h
+                    d[jj - 1], d[jj] = h, 0.0
+                    _rotate_columns(j_mat, jj - 1, jj, cs, sn)
+                for i in range(k + 1):
+                    r_mat[i, k] = d[i]
+                u[k] = u_new
+                act[k] = 2 * row + side
+                in_set[2 * row + side] = True
+                k += 1
+                added = True
+            else:
+                in_set[act[drop_at]] = False
+                k = _drop(j_mat, r_mat, u, act, k, drop_at)
+    for i in range(nf):
+        s = 0.0
+        for col in range(i, nf):
+            s += w[i, col] * y[col]
+        z[i] = s
+    for i in range(k):
+        multipliers[i] = u[i]
+        active[i] = act[i]
+    return flag, k, iterations
