@@ -71,6 +71,16 @@ def _normal(a_ptr, a_idx, a_val, extra_a, w, row, sign, out):  # pragma: no cove
 
 
 @numba.njit(cache=True)
+def _upper_times(w, y, z):  # pragma: no cover - compiled
+    """z (n,) = W y for W (n, n) upper triangular."""
+    for i in range(w.shape[0]):
+        s = 0.0
+        for col in range(i, w.shape[0]):
+            s += w[i, col] * y[col]
+        z[i] = s
+
+
+@numba.njit(cache=True)
 def _rotate_columns(j_mat, a, b, cs, sn):  # pragma: no cover - compiled
     """Columns a, b of J become cs J_a + sn J_b and -sn J_a + cs J_b."""
     for i in range(j_mat.shape[0]):
@@ -131,8 +141,9 @@ def solve_identity_qp(
     start with z_v = 0 where their multiplier c_v / (a W_vv) is >= 0: the closed form's resting variables,
     which would otherwise each cost an iteration.
 
-    Writes z (n,) = W y, and for the k active rows multipliers (k,) >= 0 and active (k,) = 2 row + side
-    (side 0: the row's lower bound, 1: its upper one). Returns (flag, k, iterations)."""
+    Writes z (n,) = W y (the optimum; only meaningful when the flag is OPTIMAL), and for the k active rows
+    multipliers (k,) >= 0 and active (k,) = 2 row + side (side 0: the row's lower bound, 1: its upper
+    one). Returns (flag, k, iterations)."""
     nf = w.shape[0]
     m = lo.shape[0]
     c = np.empty(nf)  # W^T q
@@ -178,11 +189,7 @@ def solve_identity_qp(
     iterations = 0
     flag = ITERATION_LIMIT
     while iterations < iteration_limit:
-        for i in range(nf):
-            s = 0.0
-            for col in range(i, nf):  # W is upper triangular
-                s += w[i, col] * y[col]
-            z[i] = s
+        _upper_times(w, y, z)
         _row_values(a_ptr, a_idx, a_val, extra_a, z, values)
         worst, row, side = tol, -1, 0
         for r in range(m):
@@ -259,11 +266,6 @@ def solve_identity_qp(
             else:
                 in_set[act[drop_at]] = False
                 k = _drop(j_mat, r_mat, u, act, k, drop_at)
-    for i in range(nf):
-        s = 0.0
-        for col in range(i, nf):
-            s += w[i, col] * y[col]
-        z[i] = s
     for i in range(k):
         multipliers[i] = u[i]
         active[i] = act[i]
