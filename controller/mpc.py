@@ -25,8 +25,9 @@ shared over the horizon and an exact penalty, because a strong external input ca
 
 Solvers (MpcParams.solver): "exact" (the default) is controller/qp.py: the unconstrained optimum in closed
 form whenever it provably solves the QP (almost every tick of a formation flight), otherwise the exact answer
-of a dense active-set solver (DAQP), warm-started. "osqp" is the OSQP set-up, kept as the reference the exact
-path is tested against (docs/fast-core.md has the measurements).
+of a dense dual active-set solver (compiled, controller/dual_active_set.py, or DAQP: `MpcParams.active_set`).
+"osqp" is the OSQP set-up, kept as the reference the exact path is tested against (docs/fast-core.md has the
+measurements).
 """
 
 from __future__ import annotations
@@ -68,15 +69,16 @@ class MpcParams:
     slack_weight: linear penalty per m (or m/s) of the largest violation of each state component's bounds;
     slack_quadratic_weight: its quadratic companion (per m^2), there for the solver's convergence.
 
-    solver: "exact" (closed form when provably optimal, else DAQP; controller/qp.py) or "osqp" (the
-    reference). eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its (and DAQP's)
-    iteration cap, polishing its active-set refinement. accept_inaccurate: count OSQP's "solved inaccurate"
-    (the iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the plan is
-    re-rolled through the exact dynamics with inputs clipped into their box, so it is consistent and
-    admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
+    solver: "exact" (closed form when provably optimal, else an active-set solver; controller/qp.py) or "osqp"
+    (the reference). eps_abs / eps_rel are OSQP's termination tolerances, max_iterations its (and the active
+    set's) iteration cap, polishing its active-set refinement. accept_inaccurate: count OSQP's "solved
+    inaccurate" (the iteration cap was hit with the residuals within OSQP's loosened tolerances) as ok: the
+    plan is re-rolled through the exact dynamics with inputs clipped into their box, so it is consistent
+    and admissible, only less optimal, which beats braking. Every other status (infeasible, cap hit far from a
     solution, non-convex) is a failure.
-    active_set: the exact solver's active-set step, "daqp" (the default) or "compiled" (one compiled dual
-    active-set solve; controller/qp.py, docs/fast-core.md says how they compare).
+    active_set: the exact solver's active-set step, "compiled" (the default: one compiled dual active-set
+    solve) or "daqp" (DAQP on a working set of rows); controller/qp.py, docs/fast-core.md says how they
+    compare.
     violation_tolerance: bound excursions up to this (m or m/s) are solver round-off and reported as 0.
     plan_acceleration_min_mps2, plan_acceleration_max_mps2: bounds per axis on u(n) + f(n) (before gravity,
     like the input box), the acceleration the plan asks of the vehicle with the fields included
@@ -100,7 +102,7 @@ class MpcParams:
     terminal_velocity_weight: float = 100.0
     effort: str = "hover"
     solver: str = "exact"
-    active_set: str = "daqp"
+    active_set: str = "compiled"
     slack_weight: float = 1.0e4
     slack_quadratic_weight: float = 5.0e3
     eps_abs: float = 1.0e-5
@@ -397,7 +399,7 @@ class ModelPredictiveController:
     @property
     def active_set_fallbacks(self) -> int:
         """Solves whose compiled active-set step did not end optimal (infeasible rows, its iteration limit),
-        so that DAQP's path answered them (0 unless `MpcParams.active_set` is "compiled")."""
+        so that DAQP's path answered them (always 0 with `MpcParams.active_set` "daqp")."""
         return self._fallbacks
 
     def reset(self) -> None:

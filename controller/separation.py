@@ -20,8 +20,12 @@ The paper's repulsive fields (eqs. 13, 15) shape the plan but promise nothing. T
 - **Trunks.** A vertical plane tangent to the trunk's cylinder grown by `obstacle_clearance_m` (and
   `obstacle_sigmas` times our covariance radius), facing our planned position, at every step where that
   position is below the trunk's top; the disc lies wholly behind the plane, so keeping to the plane keeps
-  clear of the disc. The plane is moved out by how far the vehicle lags its plan towards the trunk
-  (`lag_m`): the row is for the vehicle.
+  clear of the disc. Like a cooperative teammate row, it also keeps the braking room of our planned
+  closing speed on the trunk, v^2 / (2 b) (step_brake_mps2, brake_mps2 at the last step, capped at
+  brake_margin_max_m): without it a plan could meet every trunk row and still graze the grown disc at
+  the horizon's end at speed, and the vehicle, lagging its plan as it brakes, cut into it (run 912 of
+  the safety sweep: docs/safety.md). The plane is moved out by how far the vehicle lags its plan
+  towards the trunk (`lag_m`): the row is for the vehicle.
 - **The arena's floor.** At every step our previous plan is within reach of the floor (MpcParams'
   position_min_m's z), a row keeps the plan at or above the floor, or above the previous plan where that
   is lower, weighted 20 times a teammate row. Without it, rows that cannot all hold (a silent teammate
@@ -254,13 +258,15 @@ def trunk_margin_m(params: SeparationParams, own_cov_radius_m: float) -> float:
 def obstacle_rows(
     *,
     own_path_m: np.ndarray,
+    own_velocities_mps: np.ndarray,
     obstacles: ObstacleSet,
     own_cov_radius_m: float,
     params: SeparationParams,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Tangent planes to every trunk near our previous plan (within row_reach_m of binding), at steps
-    1..S-1 below its top.
+    1..S-1 below its top, moved out by the braking room of our planned closing speed on the trunk.
 
+    own_path_m, own_velocities_mps: (S, 3) our previous plan on the horizon.
     Returns steps (R,), normals (R, 3) with zero z, offsets (R,), both scaled by obstacle_row_weight."""
     if obstacles.count == 0:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
@@ -269,10 +275,14 @@ def obstacle_rows(
     normals_xy = np.where(
         dist[..., None] > 1e-6, rel / np.maximum(dist, 1e-12)[..., None], np.array([1.0, 0.0])
     )
-    grown = obstacles.radii_m + trunk_margin_m(params, own_cov_radius_m)  # (M,)
-    offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown[:, None]
+    closing = -np.einsum("msi,si->ms", normals_xy, np.asarray(own_velocities_mps, dtype=float)[:, :2])
+    decel = np.full(own_path_m.shape[0], params.step_brake_mps2)
+    decel[-1] = params.brake_mps2
+    room = np.minimum(np.maximum(closing, 0.0) ** 2 / (2.0 * decel), params.brake_margin_max_m)
+    grown = obstacles.radii_m[:, None] + trunk_margin_m(params, own_cov_radius_m) + room  # (M, S)
+    offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown
     below = own_path_m[None, :, 2] < obstacles.heights_m[:, None] + params.obstacle_clearance_m
-    near = dist - grown[:, None] < params.row_reach_m
+    near = dist - grown < params.row_reach_m
     use = below & near
     use[:, 0] = False
     m, s = np.nonzero(use)
@@ -381,7 +391,11 @@ def _reference_rows(
     else:
         mate_rows = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, len(own_path))))
     trunk_rows = obstacle_rows(
-        own_path_m=own_path, obstacles=obstacles, own_cov_radius_m=own_cov_radius, params=params
+        own_path_m=own_path,
+        own_velocities_mps=own_vel,
+        obstacles=obstacles,
+        own_cov_radius_m=own_cov_radius,
+        params=params,
     )
     return mate_rows, trunk_rows
 
@@ -395,9 +409,10 @@ def _compiled_rows(
     count = mates.count
     m_steps, m_normals, m_offsets = empty_rows(count * steps)
     dist = np.zeros((count, steps))
+    own_vel = np.ascontiguousarray(own_vel, dtype=float)
     m = teammate_rows_kernel(
         own_path,
-        np.ascontiguousarray(own_vel, dtype=float),
+        own_vel,
         np.ascontiguousarray(mates.positions_m, dtype=float),
         np.asarray(mates.vehicle_ids, dtype=np.int64),
         np.asarray(cooperative, dtype=np.bool_),
@@ -416,11 +431,15 @@ def _compiled_rows(
     o_steps, o_normals, o_offsets = empty_rows(obstacles.count * steps)
     o = obstacle_rows_kernel(
         own_path,
+        own_vel,
         np.ascontiguousarray(obstacles.centers_m, dtype=float),
         np.asarray(obstacles.radii_m, dtype=float),
         np.asarray(obstacles.heights_m, dtype=float),
         trunk_margin_m(params, float(own_cov_radius)),
         params.obstacle_clearance_m,
+        params.step_brake_mps2,
+        params.brake_mps2,
+        params.brake_margin_max_m,
         params.row_reach_m,
         params.obstacle_row_weight,
         o_steps,

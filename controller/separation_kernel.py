@@ -95,11 +95,15 @@ def teammate_rows_kernel(
 @numba.njit(cache=True)
 def obstacle_rows_kernel(
     own_path,  # (S, 3)
+    own_vel,  # (S, 3)
     centers,  # (M, 2)
     radii,  # (M,)
     heights,  # (M,)
     extra,  # m: obstacle_clearance_m + own covariance radius
     clearance,  # m: obstacle_clearance_m (the height band above a top)
+    step_brake,
+    brake,
+    cap,
     reach,
     weight,
     out_steps,  # (M * S,) int64
@@ -107,21 +111,23 @@ def obstacle_rows_kernel(
     out_offsets,  # (M * S,)
 ):
     """Fill the rows of `separation.obstacle_rows` into the out arrays, ordered as there; return how many."""
+    last = own_path.shape[0] - 1
     count = 0
     for m in range(centers.shape[0]):
-        grown = radii[m] + extra
         for s in range(1, own_path.shape[0]):
             if not own_path[s, 2] < heights[m] + clearance:
                 continue
             rx = own_path[s, 0] - centers[m, 0]
             ry = own_path[s, 1] - centers[m, 1]
             d = math.sqrt(rx * rx + ry * ry)
-            if not d - grown < reach:
-                continue
             if d > 1e-6:
                 nx, ny = rx / max(d, 1e-12), ry / max(d, 1e-12)
             else:
                 nx, ny = 1.0, 0.0
+            closing = -(nx * own_vel[s, 0] + ny * own_vel[s, 1])
+            grown = radii[m] + extra + _room(closing, brake if s == last else step_brake, cap)
+            if not d - grown < reach:
+                continue
             out_steps[count] = s
             out_normals[count, 0], out_normals[count, 1], out_normals[count, 2] = (
                 weight * nx,

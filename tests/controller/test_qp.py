@@ -257,7 +257,7 @@ def mpc_results():
     weights), solved in sequence by one exact controller, one tight OSQP controller, CVXPY + Clarabel and an
     exact controller with the compiled active-set step (which none of them may hand to DAQP)."""
     rng = np.random.default_rng(20261128)
-    exact = ModelPredictiveController(MpcParams())
+    exact = ModelPredictiveController(MpcParams(active_set="daqp"))
     reference = ModelPredictiveController(REFERENCE)
     compiled = ModelPredictiveController(MpcParams(active_set="compiled"))
     out = []
@@ -347,7 +347,7 @@ def half_plane_results():
     sequence by one exact controller, by the MPC's own OSQP set-up at tight tolerances, and by CVXPY + OSQP
     with the same soft constraints written out independently."""
     rng = np.random.default_rng(515)
-    controller = ModelPredictiveController(MpcParams())
+    controller = ModelPredictiveController(MpcParams(active_set="daqp"))
     reference = ModelPredictiveController(REFERENCE)
     compiled = ModelPredictiveController(MpcParams(active_set="compiled"))
     out = []
@@ -459,7 +459,8 @@ def test_separation_planes_on_every_step_match_osqp(soft, tilt):
     and so does the planes' remaining violation; hard planes either hold exactly or both solvers call the
     problem infeasible."""
     rng = np.random.default_rng(77 + soft + int(10 * tilt))
-    exact, reference = ModelPredictiveController(MpcParams()), ModelPredictiveController(REFERENCE)
+    exact = ModelPredictiveController(MpcParams(active_set="daqp"))
+    reference = ModelPredictiveController(REFERENCE)
     compiled = ModelPredictiveController(MpcParams(active_set="compiled"))
     solved = 0
     for _ in range(20):

@@ -127,12 +127,12 @@ TRUNK_AT_5_M = ObstacleSet.from_obstacles(
 )
 
 
-def trunk_limit_x_m(*, own_cov_radius_m=0.0, lag_m=None, compiled=True) -> np.ndarray:
-    """(R,) how far east each trunk row lets a MAV resting at (0, 0, 8) go (x <= b / n), the trunk 5 m
-    east."""
+def trunk_limit_x_m(*, own_cov_radius_m=0.0, lag_m=None, compiled=True, velocity_mps=(0.0, 0.0, 0.0)):
+    """(R,) how far east each trunk row lets a MAV at (0, 0, 8) go (x <= b / n), the trunk 5 m east; its
+    previous plan rests there, planned at velocity_mps (the closing speed the rows see)."""
     planes = separation_rows(
         own_path_m=line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0]),
-        own_velocities_mps=np.zeros((STEPS, 3)),
+        own_velocities_mps=np.tile(np.asarray(velocity_mps, float), (STEPS, 1)),
         mates=mates(np.zeros((0, STEPS, 3))),
         mate_ages_s=np.zeros(0),
         inflation_m=np.zeros(0),
@@ -151,7 +151,11 @@ def test_a_trunk_row_is_tangent_to_the_grown_disc_and_keeps_the_whole_disc_behin
     path = line([0.0, 1.0, 8.0], [1.0, 0.0, 0.0])
     unweighted = SeparationParams(obstacle_row_weight=1.0, row_reach_m=30.0, obstacle_sigmas=1.0)
     steps, normals, offsets = obstacle_rows(
-        own_path_m=path, obstacles=TRUNK_AT_5_M, own_cov_radius_m=0.2, params=unweighted
+        own_path_m=path,
+        own_velocities_mps=np.zeros((STEPS, 3)),
+        obstacles=TRUNK_AT_5_M,
+        own_cov_radius_m=0.2,
+        params=unweighted,
     )
     assert steps.tolist() == list(range(1, STEPS))
     angles = np.linspace(0.0, 2.0 * np.pi, 73)
@@ -174,7 +178,11 @@ def test_a_trunk_row_weighs_more_than_a_teammate_row():
     """Scaled by obstacle_row_weight: of the rows' shared slack a trunk row gets a fifth of a teammate's."""
     path = line([0.0, 0.0, 8.0], [0.0, 0.0, 0.0])
     _, normals, offsets = obstacle_rows(
-        own_path_m=path, obstacles=TRUNK_AT_5_M, own_cov_radius_m=0.0, params=PARAMS
+        own_path_m=path,
+        own_velocities_mps=np.zeros((STEPS, 3)),
+        obstacles=TRUNK_AT_5_M,
+        own_cov_radius_m=0.0,
+        params=PARAMS,
     )
     np.testing.assert_allclose(normals[:, 0], -5.0)
     np.testing.assert_allclose(offsets, -5.0 * (5.0 - 0.7))  # the plane 0.5 + 0.2 m from the centre
@@ -189,12 +197,29 @@ def test_a_vehicle_lagging_its_plan_towards_a_trunk_tightens_the_trunk_row_by_th
     np.testing.assert_allclose(limit[-0.4], 4.3, atol=1e-12)
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_trunk_row_keeps_the_braking_room_of_the_closing_speed(compiled):
+    """Planned at 3 m/s east, towards the trunk: each row also keeps v^2 / (2 b), 9 / 6 = 1.5 m at
+    step_brake_mps2 before the last step and 9 / 4 = 2.25 m at brake_mps2 at it, so the plan can still stop
+    short of the grown disc from every step (run 912 grazed it at speed and cut in)."""
+    limit = trunk_limit_x_m(velocity_mps=(3.0, 0.0, 0.0), compiled=compiled)
+    np.testing.assert_allclose(limit[:-1], 4.3 - 1.5, atol=1e-12)
+    np.testing.assert_allclose(limit[-1], 4.3 - 2.25, atol=1e-12)
+
+
+@pytest.mark.parametrize("velocity_mps", [(-3.0, 0.0, 0.0), (0.0, 3.0, 0.0)])
+def test_a_trunk_row_keeps_no_braking_room_when_not_closing(velocity_mps):
+    """Moving away from the trunk or past it (no closing speed along the row's normal): the plain plane."""
+    np.testing.assert_allclose(trunk_limit_x_m(velocity_mps=velocity_mps), 4.3, atol=1e-12)
+
+
 def test_no_trunk_row_above_the_trunk_top():
     trunk = ObstacleSet.from_obstacles(
         (Obstacle(obstacle_id="t", center_m=np.array([5.0, 0.0]), radius_m=0.5, height_m=6.0),)
     )
     steps, _, _ = obstacle_rows(
         own_path_m=line([0.0, 1.0, 8.0], [1, 0, 0]),
+        own_velocities_mps=np.tile([1.0, 0.0, 0.0], (STEPS, 1)),
         obstacles=trunk,
         own_cov_radius_m=0.0,
         params=PARAMS,
