@@ -276,9 +276,8 @@ def obstacle_rows(
         dist[..., None] > 1e-6, rel / np.maximum(dist, 1e-12)[..., None], np.array([1.0, 0.0])
     )
     closing = -np.einsum("msi,si->ms", normals_xy, np.asarray(own_velocities_mps, dtype=float)[:, :2])
-    decel = np.full(own_path_m.shape[0], params.step_brake_mps2)
-    decel[-1] = params.brake_mps2
-    room = np.minimum(np.maximum(closing, 0.0) ** 2 / (2.0 * decel), params.brake_margin_max_m)
+    room = braking_room_m(closing, decel_mps2=params.step_brake_mps2, cap_m=params.brake_margin_max_m)
+    room[:, -1] = braking_room_m(closing[:, -1], decel_mps2=params.brake_mps2, cap_m=params.brake_margin_max_m)
     grown = obstacles.radii_m[:, None] + trunk_margin_m(params, own_cov_radius_m) + room  # (M, S)
     offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown
     below = own_path_m[None, :, 2] < obstacles.heights_m[:, None] + params.obstacle_clearance_m
