@@ -277,7 +277,9 @@ def obstacle_rows(
     )
     closing = -np.einsum("msi,si->ms", normals_xy, np.asarray(own_velocities_mps, dtype=float)[:, :2])
     room = braking_room_m(closing, decel_mps2=params.step_brake_mps2, cap_m=params.brake_margin_max_m)
-    room[:, -1] = braking_room_m(closing[:, -1], decel_mps2=params.brake_mps2, cap_m=params.brake_margin_max_m)
+    room[:, -1] = braking_room_m(
+        closing[:, -1], decel_mps2=params.brake_mps2, cap_m=params.brake_margin_max_m
+    )
     grown = obstacles.radii_m[:, None] + trunk_margin_m(params, own_cov_radius_m) + room  # (M, S)
     offsets = np.einsum("msi,mi->ms", normals_xy, obstacles.centers_m) + grown
     below = own_path_m[None, :, 2] < obstacles.heights_m[:, None] + params.obstacle_clearance_m
