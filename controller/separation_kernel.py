@@ -114,18 +114,21 @@ def obstacle_rows_kernel(
     last = own_path.shape[0] - 1
     count = 0
     for m in range(centers.shape[0]):
+        base = radii[m] + extra
         for s in range(1, own_path.shape[0]):
             if not own_path[s, 2] < heights[m] + clearance:
                 continue
             rx = own_path[s, 0] - centers[m, 0]
             ry = own_path[s, 1] - centers[m, 1]
             d = math.sqrt(rx * rx + ry * ry)
+            if not d - base < reach + cap:  # out of reach whatever the braking room (at most cap)
+                continue
             if d > 1e-6:
                 nx, ny = rx / max(d, 1e-12), ry / max(d, 1e-12)
             else:
                 nx, ny = 1.0, 0.0
             closing = -(nx * own_vel[s, 0] + ny * own_vel[s, 1])
-            grown = radii[m] + extra + _room(closing, brake if s == last else step_brake, cap)
+            grown = base + _room(closing, brake if s == last else step_brake, cap)
             if not d - grown < reach:
                 continue
             out_steps[count] = s
