@@ -233,22 +233,26 @@ class FormationController:
             rows = self._hold_rows(tick, rows)
         planes = rows.planes if rows is not None and rows.count else None
 
-        def solve(aim_p: np.ndarray, aim_v: np.ndarray) -> MpcSolution:
+        def solve(aim_p: np.ndarray, aim_v: np.ndarray, inputs: np.ndarray) -> MpcSolution:
             return self._mpc.solve(
                 position_m=start_p,
                 velocity_mps=start_v,
                 target_position_m=aim_p,
                 target_velocity_mps=aim_v,
-                external_inputs_mps2=f_total,
+                external_inputs_mps2=inputs,
                 half_planes=planes,
             )
 
-        sol = solve(target, target_v)
+        sol = solve(target, target_v, f_total)
         escape = None
         miss = self._imminent_miss(sol, planes)
         if not hold and rows is not None and miss > self._params.separation.escape_violation_m:
             escape = f"escape: separation rows of the next steps missed by {miss:.2f} m"
-            sol = solve(*self._escape_target(tick, mates, rows))
+            # An escape flies without the fields, as a hold does: a trunk's push can exceed the input box
+            # (6.2 m/s^2 against 3 in run 360 of the safety sweep), and the plan would accelerate with it,
+            # beyond any braking the rows ask for, into the next trunk (docs/safety.md).
+            f_total = np.zeros((self._steps, 3))
+            sol = solve(*self._escape_target(tick, mates, rows), f_total)
         if not sol.ok:
             return self._brake(
                 tick,

@@ -14,9 +14,11 @@ from controller.messages import HorizonPlan, Obstacle, PersonEstimate, SolveStat
 from controller.mpc import MpcParams
 from controller.params import ControllerParams, FormationParams, Method
 from controller.reference import ReferenceParams
+from controller.separation import SeparationParams
 
 FORMATION = FormationParams(d_des_m=8.0, h_des_m=8.0)
 PERSON_AT = np.array([0.0, 0.0, 0.9])
+FIELDS_ALONE = SeparationParams(enabled=False)  # the paper's fields without the separation rows
 
 
 def person(
@@ -188,11 +190,20 @@ def test_only_in_formation_teammates_steer_the_spacing():
     assert np.linalg.norm(spaced.external_inputs[0]) > 0.1
 
 
-def test_out_of_formation_teammate_is_still_avoided():
+def test_the_fields_push_away_from_an_out_of_formation_teammate():
+    """The paper's fields alone (rows off: with them this tick is an escape, which flies without fields)."""
     own = state(on_circle(0.0))
     close = on_circle(0.0) + np.array([0.0, 2.0, 0.0])
-    out = step(controller(), own, teammates=[hold_plan(close, in_formation=False)])
-    assert out.external_inputs[0, 1] < -0.1
+    out = step(controller(separation=FIELDS_ALONE), own, teammates=[hold_plan(close, in_formation=False)])
+    assert out.external_inputs[0, 1] == pytest.approx(-1.20, abs=0.01)
+
+
+def test_an_escape_opens_the_gap_to_an_out_of_formation_teammate():
+    """2 m from a teammate outside the formation, inside the rows' 2.6 m: the escape plan ends 3.57 m off."""
+    close = on_circle(0.0) + np.array([0.0, 2.0, 0.0])
+    out = step(controller(), state(on_circle(0.0)), teammates=[hold_plan(close, in_formation=False)])
+    assert out.status == SolveStatus.ESCAPE
+    assert np.linalg.norm(out.plan.positions_m[-1] - close) == pytest.approx(3.57, abs=0.01)
 
 
 def _gap_to_a_teammate_4_m_north_as_reported(ours, theirs) -> np.ndarray:
@@ -238,14 +249,15 @@ def test_dqmpc_does_not_steer_the_spacing():
 
 
 def test_price_avoids_only_the_teammates_current_position():
+    """The methods' fields alone (rows off: with them a plan crossing ours is an escape, without fields)."""
     own = state(on_circle(0.0))
     crossing = np.repeat(on_circle(90.0)[None, :], 17, axis=0)
     crossing[5:] = on_circle(0.0) + np.array([0.0, 1.0, 0.0])  # its plan later crosses our position
     plan = HorizonPlan(
         vehicle_id=1, stamp_s=0.0, dt_s=0.1, positions_m=crossing, velocities_mps=np.zeros((17, 3))
     )
-    price = step(controller(Method.PRICE), own, teammates=[plan])
-    active = step(controller(Method.ACTIVE), own, teammates=[plan])
+    price = step(controller(Method.PRICE, separation=FIELDS_ALONE), own, teammates=[plan])
+    active = step(controller(Method.ACTIVE, separation=FIELDS_ALONE), own, teammates=[plan])
     np.testing.assert_allclose(price.external_inputs[:, :2], 0.0, atol=1e-12)
     assert np.abs(active.external_inputs[5:, 1]).max() > 1.0
 
@@ -360,11 +372,12 @@ def test_a_hold_entered_fast_towards_a_trunk_stops_three_sigma_off_its_bark():
 def test_a_plan_backing_off_a_close_teammate_asks_no_more_than_the_input_box(bounded, most_mps2):
     """At 3.8 m/s towards a teammate resting 2 m ahead, the fields push back hard: the plan's horizontal
     acceleration stays within the input box's 3 m/s^2 with the fields included; with the paper's bound (u
-    alone) it reaches 5.2 m/s^2, more than the vehicle's 4 (run 413 of the safety sweep, docs/safety.md)."""
+    alone) it reaches 5.2 m/s^2, more than the vehicle's 4 (run 413 of the safety sweep, docs/safety.md).
+    The fields alone: with the rows this tick is an escape, which flies without fields."""
     mpc = ControllerParams().mpc
     if not bounded:
         mpc = replace(mpc, plan_acceleration_min_mps2=None, plan_acceleration_max_mps2=None)
-    ctrl = controller(mpc=mpc)
+    ctrl = controller(mpc=mpc, separation=FIELDS_ALONE)
     here = on_circle(0.0)
     out = step(ctrl, state(here, (0.0, 3.8, 0.0)), teammates=[hold_plan(here + np.array([0.0, 2.0, 0.0]))])
     acceleration = np.diff(out.plan.velocities_mps, axis=0) / out.plan.dt_s
@@ -387,6 +400,25 @@ def test_an_escape_from_a_silent_teammate_above_does_not_sink_below_the_floor():
         out = step(ctrl, own, now_s=now, teammates=[mate])
         assert out.status == SolveStatus.ESCAPE
         assert out.plan.positions_m[:, 2].min() == pytest.approx(3.0, abs=1e-3)
+
+
+def test_an_escape_flies_without_the_fields_even_where_a_trunks_push_exceeds_the_input_box():
+    """A trunk 1.5 m behind pushes at 8 m/s^2, beyond the input box's 3 (the tick without a teammate shows
+    it); with a silent teammate above forcing an escape, the escape's plan has no external inputs: with
+    them it was pushed on at the box's limit, whatever the rows asked, into the next trunk (run 360 of the
+    safety sweep, docs/safety.md)."""
+    here = np.array([0.0, -8.0, 6.0])
+    trunk = Obstacle(obstacle_id="t", center_m=here[:2] + np.array([0.0, -1.8]), radius_m=0.3)
+    moving = state(here, (0.0, 3.0, 0.0))
+    alone = step(controller(), moving, obstacles=(trunk,))
+    assert alone.status == SolveStatus.SOLVED
+    assert alone.external_inputs[0, 1] == pytest.approx(8.0, abs=0.01)
+    ctrl = controller()
+    step(ctrl, state(here), obstacles=(trunk,))
+    mate = hold_plan(here + np.array([0.8, 0.0, 1.2]), stamp_s=-0.5)
+    out = step(ctrl, moving, now_s=0.1, teammates=[mate], obstacles=(trunk,))
+    assert out.status == SolveStatus.ESCAPE
+    np.testing.assert_array_equal(out.external_inputs, 0.0)
 
 
 # ------------------------------------------------------------------------------------------ bad input
