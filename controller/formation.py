@@ -138,6 +138,9 @@ class FormationController:
         self._mpc_params: MpcParams = mpc_params
         self._mpc = ModelPredictiveController(mpc_params)
         self._steps = mpc_params.horizon_steps + 1
+        # (N+1, 3) the external inputs of a plan without the fields (holds, escapes, PRICE's MPC, brakes)
+        self._no_inputs = np.zeros((self._steps, 3))
+        self._no_inputs.setflags(write=False)
         self._obstacle_key: tuple[int, ...] | None = None
         self._obstacle_refs: tuple[Obstacle, ...] = ()
         self._obstacle_set = ObstacleSet.from_obstacles(())
@@ -221,7 +224,7 @@ class FormationController:
         mates = self._teammates(() if climbing else teammates, now_s, own)
         own_path, own_vel = self._own_horizon(tick)
         if price or hold:
-            f_total = np.zeros((self._steps, 3))
+            f_total = self._no_inputs
         else:
             f_total = self._inputs(tick, person, mates, obstacle_set, formation, own_path, own_vel)
         if hold:
@@ -251,7 +254,7 @@ class FormationController:
             # An escape flies without the fields, as a hold does: a trunk's push can exceed the input box
             # (6.2 m/s^2 against 3 in run 360 of the safety sweep), and the plan would accelerate with it,
             # beyond any braking the rows ask for, into the next trunk (docs/safety.md).
-            f_total = np.zeros((self._steps, 3))
+            f_total = self._no_inputs
             sol = solve(*self._escape_target(tick, mates, rows), f_total)
         if not sol.ok:
             return self._brake(
@@ -645,7 +648,7 @@ class FormationController:
             waypoint_acceleration_mps2=wp_a,
             yaw_rad=yaw,
             status=status,
-            external_inputs=np.zeros((self._steps, 3)),
+            external_inputs=self._no_inputs,
             fault=fault,
             solver_iterations=iterations,
             solver_time_s=solve_time_s,
