@@ -14,11 +14,14 @@ optimum of the problem with its active rows as equalities (dual feasible); the f
 is the optimum. The active normals N are kept as N = J[:, :k] R (J orthogonal (n, n), R upper triangular
 (k, k)), updated by Givens rotations, so each iteration costs O(n^2) and no system is solved from scratch.
 
-Rows are read in place, the fixed ones as CSR, the per-solve (extra) ones dense: a row's value is a^T z, and
-its normal in y, W^T a, is computed only for a row that enters the active set. The closed form's resting
-variables start in the active set at 0 (`solve_identity_qp`'s start rows), so a solve where only a few rows
-bind takes a few iterations. Exit flags: 1 optimal, -1 infeasible (a violated row whose normal the active
-normals span, with no active row to give way), -2 iteration limit.
+Rows are read in place, the fixed ones as CSR, the per-solve (extra) ones dense, turned into CSR once per
+solve (their zeros skipped: a half-plane row of step n reaches only the inputs before it and one slack): a
+row's value is a^T z, and its normal in y, W^T a, is computed only for a row that enters the active set. J
+is kept transposed and W's transpose beside it, so that rotations and products run along memory; every sum
+still adds its terms in the same order, so the answer is the same to the bit as with the plain layout. The
+closed form's resting variables start in the active set at 0 (`solve_identity_qp`'s start rows), so a solve
+where only a few rows bind takes a few iterations. Exit flags: 1 optimal, -1 infeasible (a violated row
+whose normal the active normals span, with no active row to give way), -2 iteration limit.
 """
 
 from __future__ import annotations
@@ -35,19 +38,35 @@ _DEPENDENT = 1.0e-12
 
 
 @numba.njit(cache=True)
-def _row_values(a_ptr, a_idx, a_val, extra_a, z, values):  # pragma: no cover - compiled
-    """values (m0 + m1,) = the fixed rows (CSR) and the extra rows (m1, n) at z (n,)."""
-    m0 = a_ptr.shape[0] - 1
-    for r in range(m0):
+def _sparse(dense, ptr, idx, val):  # pragma: no cover - compiled
+    """The nonzeros of dense (m, n) as CSR into ptr (m + 1,), idx and val (m n,), column order kept."""
+    count = 0
+    for r in range(dense.shape[0]):
+        ptr[r] = count
+        for c in range(dense.shape[1]):
+            if dense[r, c] != 0.0:
+                idx[count] = c
+                val[count] = dense[r, c]
+                count += 1
+    ptr[dense.shape[0]] = count
+
+
+@numba.njit(cache=True)
+def _csr_values(ptr, idx, val, z, values, first):  # pragma: no cover - compiled
+    """values[first + r] = row r of a CSR matrix at z (n,)."""
+    for r in range(ptr.shape[0] - 1):
         s = 0.0
-        for k in range(a_ptr[r], a_ptr[r + 1]):
-            s += a_val[k] * z[a_idx[k]]
-        values[r] = s
-    for r in range(extra_a.shape[0]):
-        s = 0.0
-        for c in range(z.shape[0]):
-            s += extra_a[r, c] * z[c]
-        values[m0 + r] = s
+        for k in range(ptr[r], ptr[r + 1]):
+            s += val[k] * z[idx[k]]
+        values[first + r] = s
+
+
+@numba.njit(cache=True)
+def _row_values(a_ptr, a_idx, a_val, e_ptr, e_idx, e_val, z, values):  # pragma: no cover - compiled
+    """values (m0 + m1,) = the fixed rows and the extra rows (both CSR) at z (n,). The extra rows' zeros
+    are skipped: with z finite, a sum from +0.0 is never -0.0, so adding 0 * z[c] never changes it."""
+    _csr_values(a_ptr, a_idx, a_val, z, values, 0)
+    _csr_values(e_ptr, e_idx, e_val, z, values, a_ptr.shape[0] - 1)
 
 
 @numba.njit(cache=True)
@@ -71,28 +90,30 @@ def _normal(a_ptr, a_idx, a_val, extra_a, w, row, sign, out):  # pragma: no cove
 
 
 @numba.njit(cache=True)
-def _upper_times(w, y, z):  # pragma: no cover - compiled
-    """z (n,) = W y for W (n, n) upper triangular."""
-    for i in range(w.shape[0]):
-        s = 0.0
-        for col in range(i, w.shape[0]):
-            s += w[i, col] * y[col]
-        z[i] = s
+def _upper_times(w_t, y, z):  # pragma: no cover - compiled
+    """z (n,) = W y for W (n, n) upper triangular, given as w_t = W^T: each z[i] summed over its columns in
+    order, the columns outermost so that the sums run side by side along memory."""
+    z[:] = 0.0
+    for col in range(w_t.shape[0]):
+        w_col, y_col = w_t[col], y[col]
+        for i in range(col + 1):
+            z[i] += w_col[i] * y_col
 
 
 @numba.njit(cache=True)
-def _rotate_columns(j_mat, a, b, cs, sn):  # pragma: no cover - compiled
-    """Columns a, b of J become cs J_a + sn J_b and -sn J_a + cs J_b."""
-    for i in range(j_mat.shape[0]):
-        x, y = j_mat[i, a], j_mat[i, b]
-        j_mat[i, a] = cs * x + sn * y
-        j_mat[i, b] = -sn * x + cs * y
+def _rotate_columns(j_t, a, b, cs, sn):  # pragma: no cover - compiled
+    """Columns a, b of J become cs J_a + sn J_b and -sn J_a + cs J_b (rows a, b of j_t = J^T: contiguous)."""
+    ja, jb = j_t[a], j_t[b]
+    for i in range(ja.shape[0]):
+        x, y = ja[i], jb[i]
+        ja[i] = cs * x + sn * y
+        jb[i] = -sn * x + cs * y
 
 
 @numba.njit(cache=True)
-def _drop(j_mat, r_mat, u, active, k, l):  # pragma: no cover - compiled
+def _drop(j_t, r_mat, u, active, k, l):  # pragma: no cover - compiled
     """Remove active row l of k: shift R's columns, u and active left, restore R's triangle by rotations of
-    its rows (and the same rotations of J's columns). Returns k - 1."""
+    its rows (and the same rotations of J's columns, rows of j_t = J^T). Returns k - 1."""
     for c in range(l, k - 1):
         for i in range(k):
             r_mat[i, c] = r_mat[i, c + 1]
@@ -111,7 +132,7 @@ def _drop(j_mat, r_mat, u, active, k, l):  # pragma: no cover - compiled
             r_mat[j, c] = cs * p + sn * q
             r_mat[j + 1, c] = -sn * p + cs * q
         r_mat[j + 1, j] = 0.0
-        _rotate_columns(j_mat, j, j + 1, cs, sn)
+        _rotate_columns(j_t, j, j + 1, cs, sn)
     return k - 1
 
 
@@ -146,6 +167,7 @@ def solve_identity_qp(
     one). Returns (flag, k, iterations)."""
     nf = w.shape[0]
     m = lo.shape[0]
+    w_t = np.ascontiguousarray(w.T)
     c = np.empty(nf)  # W^T q
     y = np.empty(nf)
     for i in range(nf):
@@ -154,7 +176,7 @@ def solve_identity_qp(
             s += w[row, i] * q[row]
         c[i] = s
         y[i] = -s
-    j_mat = np.zeros((nf, nf))
+    j_t = np.zeros((nf, nf))  # J^T: J's columns as rows, so rotations and J d run along memory
     r_mat = np.zeros((nf, nf))
     u = np.zeros(nf + 1)
     act = np.zeros(nf + 1, dtype=np.int64)
@@ -165,6 +187,11 @@ def solve_identity_qp(
     step = np.empty(nf)
     r_dir = np.empty(nf)
     taken = np.zeros(nf, dtype=np.bool_)
+    m1 = extra_a.shape[0]
+    e_ptr = np.empty(m1 + 1, dtype=np.int64)
+    e_idx = np.empty(m1 * nf, dtype=np.int64)
+    e_val = np.empty(m1 * nf)
+    _sparse(extra_a, e_ptr, e_idx, e_val)
     k = 0
     for t in range(start_rows.shape[0]):
         row, v = start_rows[t], start_vars[t]
@@ -174,7 +201,7 @@ def solve_identity_qp(
         diag = coef * w[v, v]
         if lo[row] == 0.0 and diag > 0.0 and c[v] >= 0.0 and not taken[v]:
             y[v] = 0.0
-            j_mat[v, k] = 1.0
+            j_t[k, v] = 1.0
             r_mat[k, k] = diag
             u[k] = c[v] / diag
             act[k] = 2 * row
@@ -184,13 +211,13 @@ def solve_identity_qp(
     col = k
     for i in range(nf):
         if not taken[i]:
-            j_mat[i, col] = 1.0
+            j_t[col, i] = 1.0
             col += 1
     iterations = 0
     flag = ITERATION_LIMIT
     while iterations < iteration_limit:
-        _upper_times(w, y, z)
-        _row_values(a_ptr, a_idx, a_val, extra_a, z, values)
+        _upper_times(w_t, y, z)
+        _row_values(a_ptr, a_idx, a_val, e_ptr, e_idx, e_val, z, values)
         worst, row, side = tol, -1, 0
         for r in range(m):
             if values[r] < lo[r] - worst and not in_set[2 * r]:
@@ -212,17 +239,19 @@ def solve_identity_qp(
             iterations += 1
             for i in range(nf):  # d = J^T n
                 s = 0.0
+                j_row = j_t[i]
                 for t in range(nf):
-                    s += j_mat[t, i] * normal[t]
+                    s += j_row[t] * normal[t]
                 d[i] = s
             free2 = 0.0  # |d[k:]|^2 = n^T step
             for i in range(k, nf):
                 free2 += d[i] * d[i]
-            for i in range(nf):  # the primal step direction J[:, k:] d[k:]
-                s = 0.0
-                for t in range(k, nf):
-                    s += j_mat[i, t] * d[t]
-                step[i] = s
+            # the primal step direction J[:, k:] d[k:], summed over t in the same order for every i
+            step[:] = 0.0
+            for t in range(k, nf):
+                j_row, d_t = j_t[t], d[t]
+                for i in range(nf):
+                    step[i] += j_row[i] * d_t
             for i in range(k - 1, -1, -1):  # the dual direction R^-1 d[:k]
                 s = d[i]
                 for t in range(i + 1, k):
@@ -255,7 +284,7 @@ def solve_identity_qp(
                         continue
                     cs, sn = x / h, yy / h
                     d[jj - 1], d[jj] = h, 0.0
-                    _rotate_columns(j_mat, jj - 1, jj, cs, sn)
+                    _rotate_columns(j_t, jj - 1, jj, cs, sn)
                 for i in range(k + 1):
                     r_mat[i, k] = d[i]
                 u[k] = u_new
@@ -265,7 +294,7 @@ def solve_identity_qp(
                 added = True
             else:
                 in_set[act[drop_at]] = False
-                k = _drop(j_mat, r_mat, u, act, k, drop_at)
+                k = _drop(j_t, r_mat, u, act, k, drop_at)
     for i in range(k):
         multipliers[i] = u[i]
         active[i] = act[i]
