@@ -110,12 +110,21 @@ class _Tick:
 
 
 def _finite(*arrays) -> bool:
-    return all(bool(np.isfinite(a).all()) for a in arrays)
+    """Every number of every array finite (on plain floats: these are (3,) vectors and (3, 3) covariances)."""
+    for a in arrays:
+        for v in np.asarray(a).ravel().tolist():
+            if not math.isfinite(v):
+                return False
+    return True
 
 
 def _sane(*arrays) -> bool:
     """Finite and within SANE_ABS (a NaN fails the comparison). On plain floats: these are (3,) vectors."""
-    return all(abs(v) < SANE_ABS for a in arrays for v in np.asarray(a).ravel().tolist())
+    for a in arrays:
+        for v in np.asarray(a).ravel().tolist():
+            if not abs(v) < SANE_ABS:
+                return False
+    return True
 
 
 class FormationController:
@@ -151,7 +160,13 @@ class FormationController:
         self._step_times = dt * np.arange(self._steps)[:, None]  # (N+1, 1) n dt
         # input_displacement's weights dt^2 (N - n + 1/2), computed once
         self._displacement_weights = dt * dt * (self._steps - 1 - np.arange(self._steps) + 0.5)
-        self._prev_rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        # The previous plan as align_rows' table of two rows (positions, velocities), filled in place when
+        # the plan changes (every solved tick): (2, L, 3), lengths (2,), stamps (2,) s, steps (2,) s.
+        self._prev_source: np.ndarray | None = None  # the plan's positions_m these were copied from
+        self._prev_both = np.empty((2, self._steps + 1, 3))
+        self._prev_lengths = np.zeros(2, dtype=np.int64)
+        self._prev_stamps = np.zeros(2)
+        self._prev_dts = np.zeros(2)
         self._two_rows = np.arange(2)
         self.reset()
 
@@ -557,18 +572,27 @@ class FormationController:
         plan_velocities, in one compiled call)."""
         plan = self._prev_plan
         assert plan is not None
-        if self._prev_rows is None or self._prev_rows[0] is not plan.positions_m:
-            self._prev_rows = (
-                plan.positions_m,
-                np.stack([plan.positions_m, plan.velocities_mps]),
-                np.full(2, len(plan.positions_m), dtype=np.int64),
-                np.full(2, plan.stamp_s),
-                np.full(2, plan.dt_s),
-            )
-        _, both, lengths, stamps, dts = self._prev_rows
+        if self._prev_source is not plan.positions_m:
+            length = len(plan.positions_m)
+            if length > self._prev_both.shape[1]:
+                self._prev_both = np.empty((2, length, 3))
+            self._prev_both[0, :length] = plan.positions_m
+            self._prev_both[1, :length] = plan.velocities_mps
+            self._prev_lengths[:] = length
+            self._prev_stamps[:] = plan.stamp_s
+            self._prev_dts[:] = plan.dt_s
+            self._prev_source = plan.positions_m
         out = np.empty((2, self._steps, 3))
         align_rows(
-            both, lengths, stamps, dts, self._two_rows, float(now_s), self._mpc_params.dt_s, False, out
+            self._prev_both,
+            self._prev_lengths,
+            self._prev_stamps,
+            self._prev_dts,
+            self._two_rows,
+            float(now_s),
+            self._mpc_params.dt_s,
+            False,
+            out,
         )
         return out[0], out[1]
 
