@@ -148,7 +148,7 @@ class TeammatePaths:
         relative to us, both GPS offsets taken out (controller/gps_offset.py)."""
         offsets = np.zeros((self.count, 3)) if self.gps_offsets_m is None else self.gps_offsets_m
         shift = np.asarray(own_offset_m, dtype=float)[None, :] - offsets
-        if not np.any(shift):
+        if not shift.any():
             return self
         return replace(self, positions_m=self.positions_m + shift[:, None, :])
 

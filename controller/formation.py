@@ -147,6 +147,8 @@ class FormationController:
         self._mpc_params: MpcParams = mpc_params
         self._mpc = ModelPredictiveController(mpc_params)
         self._steps = mpc_params.horizon_steps + 1
+        self._arena_lo_m = np.asarray(mpc_params.position_min_m, dtype=float)  # (3,) the arena's box
+        self._arena_hi_m = np.asarray(mpc_params.position_max_m, dtype=float)
         # (N+1, 3) the external inputs of a plan without the fields (holds, escapes, PRICE's MPC, brakes)
         self._no_inputs = np.zeros((self._steps, 3))
         self._no_inputs.setflags(write=False)
@@ -368,10 +370,9 @@ class FormationController:
             )
         if ref_p is not None and ref_v is not None:
             return ref_p, ref_v
-        mp = self._mpc_params
         if self._last_position is not None:
             return self._last_position.copy(), np.zeros(3)
-        return clip_into(np.zeros(3), lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
+        return clip_into(np.zeros(3), lower_m=self._arena_lo_m, upper_m=self._arena_hi_m), np.zeros(3)
 
     def _teammates(
         self, teammates: Sequence[HorizonPlan] | TeammateView, now_s: float, own: VehicleState
@@ -562,10 +563,9 @@ class FormationController:
 
     def _rest_at(self, tick: _Tick, height_m: float) -> tuple[np.ndarray, np.ndarray]:
         """A resting aim (zero velocity) above the start position at height_m, clipped into the arena."""
-        mp = self._mpc_params
         target = tick.start_p.copy()
         target[2] = height_m
-        return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), np.zeros(3)
+        return clip_into(target, lower_m=self._arena_lo_m, upper_m=self._arena_hi_m), np.zeros(3)
 
     def _previous_plan_on_horizon(self, now_s: float) -> tuple[np.ndarray, np.ndarray]:
         """The previous plan's positions and velocities (N+1, 3) at now_s + n dt (fields.plan_path and
@@ -627,7 +627,7 @@ class FormationController:
             # reference.input_displacement with its weights computed once
             shift_p, shift_v = self._displacement_weights @ f_total, mp.dt_s * f_total.sum(axis=0)
             target, target_v = target + shift_p, target_v + shift_v
-        return clip_into(target, lower_m=mp.position_min_m, upper_m=mp.position_max_m), target_v
+        return clip_into(target, lower_m=self._arena_lo_m, upper_m=self._arena_hi_m), target_v
 
     def _plan(self, tick: _Tick, positions: np.ndarray, velocities: np.ndarray) -> HorizonPlan:
         cov = np.asarray(tick.own.position_cov_m2, dtype=float)

@@ -572,26 +572,30 @@ class ModelPredictiveController:
             return None
         steps = np.asarray(half_planes.steps)
         count = steps.shape[0]
-        normals = np.asarray(half_planes.normals_xy, dtype=float)
+        normals_xy = np.asarray(half_planes.normals_xy, dtype=float)
         offsets = np.asarray(half_planes.offsets, dtype=float)
-        soft = np.ones(count, dtype=bool) if half_planes.soft is None else np.asarray(half_planes.soft)
+        soft = None if half_planes.soft is None else np.asarray(half_planes.soft)
         normals_z = half_planes.z_normals
         if (
             steps.ndim != 1
-            or normals.shape != (count, 2)
+            or normals_xy.shape != (count, 2)
             or offsets.shape != (count,)
-            or soft.shape != (count,)
+            or (soft is not None and soft.shape != (count,))
             or normals_z.shape != (count,)
         ):
             raise ValueError(
                 "half-planes: steps (R,), normals_xy (R, 2), offsets (R,), soft (R,), normals_z (R,); "
                 f"got {count} steps"
             )
-        if not np.issubdtype(steps.dtype, np.integer) or steps.min() < 1 or steps.max() > self._n_steps:
+        if steps.dtype.kind not in "iu" or steps.min() < 1 or steps.max() > self._n_steps:
             raise ValueError(f"half-plane steps must be integers in 1..{self._n_steps}")
-        if soft.dtype != bool:
+        if soft is not None and soft.dtype != bool:
             raise ValueError(f"half-plane soft must be an array of bool, got {soft.dtype}")
-        return steps.astype(np.int64), np.column_stack([normals, normals_z]), offsets, soft.astype(float)
+        normals = np.empty((count, 3))
+        normals[:, :2] = normals_xy
+        normals[:, 2] = normals_z
+        weights = np.ones(count) if soft is None else soft.astype(float)
+        return steps.astype(np.int64, copy=False), normals, offsets, weights
 
     def _half_plane_rows(
         self,

@@ -86,7 +86,7 @@ def plan_state_at(
     held at the last state."""
     last = len(positions_m) - 1
     k = min(max(elapsed_s / dt_s, 0.0), float(last))
-    lo = min(int(np.floor(k)), last)
+    lo = min(math.floor(k), last)
     hi = min(lo + 1, last)
     a = k - lo
     return (
@@ -100,7 +100,7 @@ def plan_acceleration_at(velocities_mps: np.ndarray, *, elapsed_s: float, dt_s: 
     after its x(0): the plan's u + f + g on that step, what the autopilot is told as feed-forward. Zero from
     the last state on (the plan is held there)."""
     last = len(velocities_mps) - 1
-    lo = int(np.floor(max(elapsed_s / dt_s, 0.0) + 1e-9))  # a whole step's time may land just below it
+    lo = math.floor(max(elapsed_s / dt_s, 0.0) + 1e-9)  # a whole step's time may land just below it
     if lo >= last:
         return np.zeros(3)
     return (np.asarray(velocities_mps[lo + 1], dtype=float) - velocities_mps[lo]) / dt_s
@@ -157,4 +157,6 @@ def input_displacement(external_inputs_mps2: np.ndarray, *, dt_s: float) -> tupl
 
 def clip_into(position_m: np.ndarray, *, lower_m, upper_m) -> np.ndarray:
     """(3,) position clipped into the box [lower_m, upper_m]."""
-    return np.clip(position_m, np.asarray(lower_m, dtype=float), np.asarray(upper_m, dtype=float))
+    return np.asarray(position_m, dtype=float).clip(
+        np.asarray(lower_m, dtype=float), np.asarray(upper_m, dtype=float)
+    )

@@ -48,7 +48,7 @@ import numpy as np
 
 from controller.fields import ObstacleSet, TeammatePaths
 from controller.mpc import HalfPlanes
-from controller.separation_kernel import empty_rows, obstacle_rows_kernel, teammate_rows_kernel
+from controller.separation_kernel import empty_rows, separation_rows_kernel
 
 
 @dataclass(frozen=True)
@@ -338,7 +338,7 @@ def separation_rows(
     """
     cooperative = mates.in_formation & (mate_ages_s <= params.cooperative_age_s)
     build = _compiled_rows if compiled else _reference_rows
-    (t_steps, t_normals, t_offsets, dist), (o_steps, o_normals, o_offsets) = build(
+    steps, normals, offsets, (t, o, f), closest_index, closest = build(
         own_path_m,
         own_velocities_mps,
         mates,
@@ -349,37 +349,22 @@ def separation_rows(
         dt_s,
         own_id,
         params,
+        floor_m,
     )
-    if mates.count:
-        per_mate = dist.min(axis=1)
-        closest_index = int(np.argmin(per_mate))
-        closest = float(per_mate[closest_index])
-    else:
-        closest_index, closest = -1, math.inf
-    if lag_m is not None:
-        o_offsets = o_offsets + np.maximum(-(o_normals @ np.asarray(lag_m, dtype=float)), 0.0)
-    f_steps, f_normals, f_offsets = np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
-    if floor_m is not None and own_path_m[1:, 2].min() - floor_m < params.row_reach_m:  # else none in reach
-        f_steps, f_normals, f_offsets = floor_rows(own_path_m=own_path_m, floor_m=floor_m, params=params)
-    normals = np.concatenate([t_normals, o_normals, f_normals])
-    offsets = np.concatenate([t_offsets, o_offsets, f_offsets])
-    planes = HalfPlanes(
-        steps=np.concatenate([t_steps, o_steps, f_steps]).astype(np.int64),
-        normals_xy=normals[:, :2],
-        normals_z=normals[:, 2],
-        offsets=offsets,
-    )
-    counts = int(t_steps.shape[0]), int(o_steps.shape[0])
-    return SeparationRows(planes, *counts, closest, closest_index, floor_rows=int(f_steps.shape[0]))
+    if lag_m is not None and o:
+        trunk = slice(t, t + o)
+        offsets[trunk] = offsets[trunk] + np.maximum(-(normals[trunk] @ np.asarray(lag_m, dtype=float)), 0.0)
+    planes = HalfPlanes(steps=steps, normals_xy=normals[:, :2], normals_z=normals[:, 2], offsets=offsets)
+    return SeparationRows(planes, t, o, closest, closest_index, floor_rows=f)
 
 
 def _reference_rows(
-    own_path, own_vel, mates, cooperative, inflation, obstacles, own_cov_radius, dt, own_id, params
+    own_path, own_vel, mates, cooperative, inflation, obstacles, own_cov_radius, dt, own_id, params, floor
 ):
-    """The rows by the numpy functions above: ((steps, normals, offsets, pair distances), (steps, normals,
-    offsets))."""
+    """The rows by the numpy functions above: (steps (R,), normals (R, 3), offsets (R,), (teammate, trunk,
+    floor) row counts, closest teammate's index, its distance)."""
     if mates.count:
-        mate_rows = teammate_rows(
+        t_steps, t_normals, t_offsets, dist = teammate_rows(
             own_path_m=own_path,
             own_velocities_mps=own_vel,
             mates=mates,
@@ -389,62 +374,67 @@ def _reference_rows(
             own_id=own_id,
             params=params,
         )
+        per_mate = dist.min(axis=1)
+        closest_index = int(np.argmin(per_mate))
+        closest = float(per_mate[closest_index])
     else:
-        mate_rows = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, len(own_path))))
-    trunk_rows = obstacle_rows(
+        t_steps, t_normals, t_offsets = np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+        closest_index, closest = -1, math.inf
+    o_steps, o_normals, o_offsets = obstacle_rows(
         own_path_m=own_path,
         own_velocities_mps=own_vel,
         obstacles=obstacles,
         own_cov_radius_m=own_cov_radius,
         params=params,
     )
-    return mate_rows, trunk_rows
+    f_steps, f_normals, f_offsets = np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+    if floor is not None:
+        f_steps, f_normals, f_offsets = floor_rows(own_path_m=own_path, floor_m=floor, params=params)
+    counts = (len(t_steps), len(o_steps), len(f_steps))
+    return (
+        np.concatenate([t_steps, o_steps, f_steps]).astype(np.int64),
+        np.concatenate([t_normals, o_normals, f_normals]),
+        np.concatenate([t_offsets, o_offsets, f_offsets]),
+        counts,
+        closest_index,
+        closest,
+    )
 
 
 def _compiled_rows(
-    own_path, own_vel, mates, cooperative, inflation, obstacles, own_cov_radius, dt, own_id, params
+    own_path, own_vel, mates, cooperative, inflation, obstacles, own_cov_radius, dt, own_id, params, floor
 ):
-    """The same rows as `_reference_rows`, by separation_kernel.py's kernels."""
+    """The same as `_reference_rows`, by separation_kernel.py's kernels in one call."""
     own_path = np.ascontiguousarray(own_path, dtype=float)
     steps = own_path.shape[0]
     count = mates.count
-    m_steps, m_normals, m_offsets = empty_rows(count * steps)
-    dist = np.zeros((count, steps))
-    own_vel = np.ascontiguousarray(own_vel, dtype=float)
-    m = teammate_rows_kernel(
+    out_steps, out_normals, out_offsets = empty_rows((count + obstacles.count + 1) * steps)
+    dist = np.empty((count, steps))
+    t, o, f, closest_index, closest = separation_rows_kernel(
         own_path,
-        own_vel,
+        np.ascontiguousarray(own_vel, dtype=float),
         np.ascontiguousarray(mates.positions_m, dtype=float),
         np.asarray(mates.vehicle_ids, dtype=np.int64),
         np.asarray(cooperative, dtype=np.bool_),
         params.separation_m + np.asarray(inflation, dtype=float),
         float(dt),
         int(own_id),
-        params.step_brake_mps2,
-        params.brake_mps2,
-        params.brake_margin_max_m,
-        params.row_reach_m,
-        m_steps,
-        m_normals,
-        m_offsets,
-        dist,
-    )
-    o_steps, o_normals, o_offsets = empty_rows(obstacles.count * steps)
-    o = obstacle_rows_kernel(
-        own_path,
-        own_vel,
         np.ascontiguousarray(obstacles.centers_m, dtype=float),
         np.asarray(obstacles.radii_m, dtype=float),
         np.asarray(obstacles.heights_m, dtype=float),
         trunk_margin_m(params, float(own_cov_radius)),
         params.obstacle_clearance_m,
+        params.obstacle_row_weight,
+        math.nan if floor is None else float(floor),
+        params.floor_row_weight,
         params.step_brake_mps2,
         params.brake_mps2,
         params.brake_margin_max_m,
         params.row_reach_m,
-        params.obstacle_row_weight,
-        o_steps,
-        o_normals,
-        o_offsets,
+        out_steps,
+        out_normals,
+        out_offsets,
+        dist,
     )
-    return (m_steps[:m], m_normals[:m], m_offsets[:m], dist), (o_steps[:o], o_normals[:o], o_offsets[:o])
+    rows = t + o + f
+    return out_steps[:rows], out_normals[:rows], out_offsets[:rows], (t, o, f), closest_index, closest

@@ -142,6 +142,114 @@ def obstacle_rows_kernel(
     return count
 
 
+@numba.njit(cache=True)
+def floor_rows_kernel(own_path, floor, reach, weight, out_steps, out_normals, out_offsets):
+    """Fill the rows of `separation.floor_rows` into the out arrays, ordered as there; return how many."""
+    count = 0
+    for s in range(1, own_path.shape[0]):
+        height = own_path[s, 2]
+        if height - floor < reach:
+            out_steps[count] = s
+            out_normals[count, 0], out_normals[count, 1], out_normals[count, 2] = 0.0, 0.0, weight
+            out_offsets[count] = weight * min(floor, height)
+            count += 1
+    return count
+
+
+@numba.njit(cache=True)
+def closest_teammate(dist):
+    """(index, distance) of the teammate whose plan comes closest over the horizon, dist (J, S); (-1, inf)
+    for none. The first of equals, as numpy's argmin of the row minima."""
+    best, index = math.inf, -1
+    for j in range(dist.shape[0]):
+        low = dist[j, 0]
+        for s in range(1, dist.shape[1]):
+            low = min(low, dist[j, s])
+        if index < 0 or low < best:
+            best, index = low, j
+    return index, best
+
+
+@numba.njit(cache=True)
+def separation_rows_kernel(
+    own_path,  # (S, 3)
+    own_vel,  # (S, 3)
+    mate_pos,  # (J, S, 3)
+    mate_ids,  # (J,) int64
+    coop,  # (J,) bool
+    gap,  # (J,) m: separation_m + inflation
+    dt,
+    own_id,
+    centers,  # (M, 2)
+    radii,  # (M,)
+    heights,  # (M,)
+    extra,  # m: the trunk rows' margin off the bark
+    clearance,  # m: obstacle_clearance_m
+    obstacle_weight,
+    floor,  # m; NaN: no floor rows
+    floor_weight,
+    step_brake,
+    brake,
+    cap,
+    reach,
+    out_steps,  # ((J + M + 1) S,) int64
+    out_normals,  # ((J + M + 1) S, 3)
+    out_offsets,  # ((J + M + 1) S,)
+    dist_out,  # (J, S)
+):
+    """Every separation row of a tick in one call, into one set of out arrays: the teammate rows, then the
+    trunk rows, then the floor rows (each as its own kernel above). Returns (teammate rows, trunk rows,
+    floor rows, closest teammate's index, its distance) (`closest_teammate`)."""
+    t = teammate_rows_kernel(
+        own_path,
+        own_vel,
+        mate_pos,
+        mate_ids,
+        coop,
+        gap,
+        dt,
+        own_id,
+        step_brake,
+        brake,
+        cap,
+        reach,
+        out_steps,
+        out_normals,
+        out_offsets,
+        dist_out,
+    )
+    o = obstacle_rows_kernel(
+        own_path,
+        own_vel,
+        centers,
+        radii,
+        heights,
+        extra,
+        clearance,
+        step_brake,
+        brake,
+        cap,
+        reach,
+        obstacle_weight,
+        out_steps[t:],
+        out_normals[t:],
+        out_offsets[t:],
+    )
+    f = 0
+    if floor == floor:
+        f = floor_rows_kernel(
+            own_path,
+            floor,
+            reach,
+            floor_weight,
+            out_steps[t + o :],
+            out_normals[t + o :],
+            out_offsets[t + o :],
+        )
+    index, closest = closest_teammate(dist_out)
+    return t, o, f, index, closest
+
+
 def empty_rows(capacity: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Out arrays for a kernel: steps (capacity,) int64, normals (capacity, 3), offsets (capacity,)."""
     return np.zeros(capacity, dtype=np.int64), np.zeros((capacity, 3)), np.zeros(capacity)
