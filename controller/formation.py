@@ -333,12 +333,12 @@ class FormationController:
         self, now_s: float, own: VehicleState, person: PersonEstimate | None, formation: FormationParams
     ) -> str | None:
         """Why this tick cannot be planned, or None."""
-        if not np.isfinite(now_s):
+        if not math.isfinite(now_s):
             return "the time is not finite"
         if not _sane(own.position_m, own.velocity_mps):
             return "own state is not finite (or beyond 1000 km)"
         d_des, h_des = formation.d_des_m, formation.h_des_m
-        if not (np.isfinite(d_des) and d_des > 0.0 and np.isfinite(h_des)):
+        if not (math.isfinite(d_des) and d_des > 0.0 and math.isfinite(h_des)):
             return f"invalid formation parameters d_des={d_des} h_des={h_des}"
         if person is not None and not _sane(person.position_m, person.velocity_mps):
             return "person estimate is not finite (or beyond 1000 km)"
@@ -347,7 +347,7 @@ class FormationController:
     def _reference_state(self, now_s: float) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
         """The previous plan's state at now_s, if there is a previous plan that covers now_s."""
         plan = self._prev_plan
-        if plan is None or not np.isfinite(now_s):
+        if plan is None or not math.isfinite(now_s):
             return None, None
         elapsed = now_s - plan.stamp_s
         if elapsed < 0.0 or elapsed > (len(plan.positions_m) - 1) * plan.dt_s:
@@ -631,7 +631,7 @@ class FormationController:
 
     def _plan(self, tick: _Tick, positions: np.ndarray, velocities: np.ndarray) -> HorizonPlan:
         cov = np.asarray(tick.own.position_cov_m2, dtype=float)
-        stamp = float(tick.now_s) if np.isfinite(tick.now_s) else 0.0
+        stamp = float(tick.now_s) if math.isfinite(tick.now_s) else 0.0
         return HorizonPlan(
             vehicle_id=self._id,
             stamp_s=stamp,
