@@ -1,5 +1,6 @@
 """The compiled separation rows (controller/separation_kernel.py) against the numpy reference
-(controller/separation.py): the same rows, in the same order, to round-off, on 1,200 random ticks."""
+(controller/separation.py): the same rows, in the same order, to round-off, on 1,200 random ticks (teammate,
+trunk and floor rows, with and without the vehicle's lag behind its plan)."""
 
 from __future__ import annotations
 
@@ -53,6 +54,8 @@ def random_tick(rng: np.random.Generator) -> dict:
         dt_s=DT,
         own_id=1,
         params=SeparationParams(),
+        lag_m=rng.normal(0.0, 0.3, 3) if rng.random() < 0.5 else None,
+        floor_m=float(rng.uniform(2.0, 5.0)) if rng.random() < 0.5 else None,
     )
 
 
@@ -68,7 +71,11 @@ def pairs():
 
 def test_compiled_rows_are_the_reference_rows_in_the_same_order(pairs):
     for fast, ref in pairs:
-        assert (fast.teammate_rows, fast.obstacle_rows) == (ref.teammate_rows, ref.obstacle_rows)
+        assert (fast.teammate_rows, fast.obstacle_rows, fast.floor_rows) == (
+            ref.teammate_rows,
+            ref.obstacle_rows,
+            ref.floor_rows,
+        )
         np.testing.assert_array_equal(fast.planes.steps, ref.planes.steps)
         np.testing.assert_allclose(fast.planes.normals_xy, ref.planes.normals_xy, rtol=0, atol=1e-12)
         np.testing.assert_allclose(fast.planes.normals_z, ref.planes.normals_z, rtol=0, atol=1e-12)
@@ -78,8 +85,9 @@ def test_compiled_rows_are_the_reference_rows_in_the_same_order(pairs):
 
 
 def test_the_random_ticks_exercise_every_kind_of_row(pairs):
-    """Enough rows of each kind for the comparison to mean something: teammate rows, trunk rows, and ticks
-    with neither."""
-    assert sum(ref.teammate_rows for _, ref in pairs) > 50_000  # measured 99,722
-    assert sum(ref.obstacle_rows for _, ref in pairs) > 50_000  # 65,889
-    assert sum(ref.count == 0 for _, ref in pairs) >= 5  # 11
+    """Enough rows of each kind for the comparison to mean something: teammate rows, trunk rows, floor rows,
+    and ticks with none."""
+    assert sum(ref.teammate_rows for _, ref in pairs) > 50_000  # measured 99,657
+    assert sum(ref.obstacle_rows for _, ref in pairs) > 50_000  # 72,406
+    assert sum(ref.floor_rows for _, ref in pairs) > 2_000  # 5,049
+    assert sum(ref.count == 0 for _, ref in pairs) >= 5  # 7
