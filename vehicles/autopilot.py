@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from controller.messages import _freeze
+from controller.messages import _freeze, read_only
 
 
 class FlightMode(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports
@@ -62,7 +62,7 @@ class AutopilotState:
     pitch_rad: float = 0.0
     battery_fraction: float | None = None
     healthy: bool = True
-    position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
+    position_cov_m2: np.ndarray = field(default_factory=lambda: read_only(np.eye(3) * 0.25))
     link_lost: bool = False
     released: bool = False
     autopilot_mode: str = ""
@@ -87,7 +87,7 @@ class Setpoint:
     position_m: np.ndarray
     velocity_mps: np.ndarray
     yaw_rad: float
-    acceleration_mps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    acceleration_mps2: np.ndarray = field(default_factory=lambda: read_only(np.zeros(3)))
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))
