@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from controller.angles import wrap_angle
-from controller.messages import frozen_array
+from controller.messages import frozen_array, read_only
 from vehicles.autopilot import AutopilotState, FlightMode, Setpoint
 from vehicles.sim.gps_drift import GpsDrift
 from vehicles.world import BodyPose
@@ -143,8 +143,12 @@ class SimAutopilot:
             self._state = AutopilotState(
                 vehicle_id=self.vehicle_id,
                 stamp_s=self._t,
-                position_m=np.array([self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]]),
-                velocity_mps=np.array([self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]]),
+                position_m=read_only(
+                    np.array([self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]])
+                ),
+                velocity_mps=read_only(
+                    np.array([self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]])
+                ),
                 yaw_rad=self._yaw,
                 armed=self._armed,
                 in_air=self._in_air,
