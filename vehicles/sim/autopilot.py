@@ -138,7 +138,7 @@ class SimAutopilot:
                 self._cut_state = _with_link_lost(self._cut_state)
             return self._cut_state
         if self._state is None:
-            off, dv = self._drift.offset_m, self._drift.velocity_mps
+            off, dv = self._drift.offset_m.tolist(), self._drift.velocity_mps.tolist()
             roll, pitch = self._attitude()
             self._state = AutopilotState(
                 vehicle_id=self.vehicle_id,
@@ -305,7 +305,9 @@ class SimAutopilot:
         self._set_mode(FlightMode.LAND)
 
     def _believed(self) -> list[float]:
-        off = self._drift.offset_m
+        """The position the GPS reports. Python floats, not numpy scalars: the same sums, and what the
+        physics step computes from them stays in (faster) plain float arithmetic, rounded alike."""
+        off = self._drift.offset_m.tolist()
         return [self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]]
 
     def _attitude(self) -> tuple[float, float]:
