@@ -195,6 +195,10 @@ class _Entry:
     P_before: np.ndarray | None = None
 
 
+def _entry_key(entry: _Entry) -> tuple[float, int]:
+    return entry.key
+
+
 class PersonTracker:
     """One MAV's replica of the person's state, fed by world-frame detections from every teammate.
 
@@ -265,9 +269,8 @@ class PersonTracker:
             self._cache = [_Entry(key, z, R)]
             return self._count(verdict)
         cache = self._cache
-        keys = [entry.key for entry in cache]
-        index = bisect.bisect_left(keys, key)
-        if index == 0 or (index < len(keys) and keys[index] == key):
+        index = bisect.bisect_left(cache, key, key=_entry_key)  # no list of every key for each detection
+        if index == 0 or (index < len(cache) and cache[index].key == key):
             return self._count(Verdict.STALE)
         if index < len(cache):
             return self._count(self._merge_late(index, key, z, R))
