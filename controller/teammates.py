@@ -141,6 +141,9 @@ class TeammateTable:
         self._radii = np.zeros(capacity)
         self._in_formation = np.zeros(capacity, dtype=np.bool_)
         self._row_ids = np.zeros(capacity, dtype=np.int64)
+        # (vehicle id, stamp, in formation) of each row as Python values: what the agent asks of the table
+        # every tick (fresh_count, fresh_ids), answered without numpy's per-call cost on a few rows.
+        self._heard: list[tuple[int, float, bool]] = []
 
     def _grow(self, capacity: int, length: int) -> None:
         """Re-allocate every column for `capacity` rows of `length` states, keeping the stored rows."""
@@ -165,11 +168,9 @@ class TeammateTable:
 
     def fresh_ids(self, since_s: float, *, in_formation: bool = True) -> set[int]:
         """Vehicle ids of the plans stamped at or after since_s (only in-formation ones by default)."""
-        n = self._count
-        fresh = self._stamps[:n] >= since_s
-        if in_formation:
-            fresh &= self._in_formation[:n]
-        return set(self._row_ids[:n][fresh].tolist())
+        return {
+            vid for vid, stamp, flying in self._heard if stamp >= since_s and (flying or not in_formation)
+        }
 
     def update(self, plan: HorizonPlan) -> str:
         """Store `plan` as its teammate's latest: "stored"; "older" (an older plan than the stored one, not an
@@ -196,6 +197,7 @@ class TeammateTable:
                 arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
             self._count += 1
             self._row_ids[row] = vid
+            self._heard.insert(row, (vid, plan.stamp_s, plan.in_formation))
             self._row_of = {int(v): r for r, v in enumerate(self._row_ids[: self._count].tolist())}
         row = self._row_of[vid]
         length = positions.shape[0]
@@ -209,16 +211,13 @@ class TeammateTable:
         self._stamps[row] = plan.stamp_s
         self._dts[row] = plan.dt_s
         self._in_formation[row] = plan.in_formation
+        self._heard[row] = (vid, float(self._stamps[row]), bool(self._in_formation[row]))
         self._offsets[row] = plan.gps_offset_m
         return "stored"
 
     def fresh_count(self, since_s: float, *, in_formation: bool = True) -> int:
         """How many stored plans are stamped at or after since_s (only in-formation ones by default)."""
-        n = self._count
-        fresh = self._stamps[:n] >= since_s
-        if in_formation:
-            fresh &= self._in_formation[:n]
-        return int(np.count_nonzero(fresh))
+        return sum(1 for _, stamp, flying in self._heard if stamp >= since_s and (flying or not in_formation))
 
     def paths(
         self,
