@@ -32,6 +32,7 @@ without an accepted detection the track expires and the next detection starts a 
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from dataclasses import dataclass
 from enum import StrEnum
@@ -176,6 +177,18 @@ def _predicted(dt_s, tau_s, psd, x, p, position_out, velocity_out, p_out):  # pr
             p_out[j, i] = mean
 
 
+@functools.lru_cache(maxsize=256)
+def _shared_transition(
+    dt_s: float, tau_s: float, psd: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """`_transition`, remembered and read-only: the steps between detections take a few values only (16 MAVs
+    at 100 Hz: 18 distinct ones in 8 s, over 4000 predictions), and every MAV's tracker has the same model."""
+    F, Q = _transition(dt_s, tau_s, np.asarray(psd))
+    F.setflags(write=False)
+    Q.setflags(write=False)
+    return F, Q
+
+
 def transition(*, dt_s: float, params: TrackerParams) -> tuple[np.ndarray, np.ndarray]:
     """(F (6, 6), Q (6, 6)) of the decaying-velocity model over dt_s >= 0 (module docstring)."""
     psd = np.square(np.asarray(params.velocity_noise_mps_per_sqrt_s, dtype=float))
@@ -210,7 +223,7 @@ class PersonTracker:
         self._tau = self.params.velocity_time_constant_s
         psd = np.square(np.asarray(self.params.velocity_noise_mps_per_sqrt_s, dtype=float))
         self._psd = psd
-        self._memo: tuple[float, np.ndarray, np.ndarray] = (-1.0, np.eye(6), np.zeros((6, 6)))
+        self._psd_key = tuple(psd.tolist())  # the same values, hashable (`_shared_transition`)
         self._P0 = np.diag(np.asarray(self.params.initial_cov_diag, dtype=float))
         self._kf = KalmanFilter(dim_x=6, dim_z=3)
         self._kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
@@ -327,11 +340,8 @@ class PersonTracker:
         return verdict
 
     def _fq(self, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """F, Q over dt_s, remembering the last pair (gating and prediction ask for the same dt in turn).
-        Callers must not modify the returned arrays."""
-        if dt_s != self._memo[0]:
-            self._memo = (dt_s, *_transition(dt_s, self._tau, self._psd))
-        return self._memo[1], self._memo[2]
+        """F, Q over dt_s, read-only and shared (`_shared_transition`)."""
+        return _shared_transition(dt_s, self._tau, self._psd_key)
 
     def _within_gate(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> bool:
         """Whether z (3, 1) lies within gate_sigma (Mahalanobis) of the predicted state x (6, 1), P (6, 6)."""
