@@ -174,9 +174,9 @@ class SimAutopilot:
         if not (self._armed and self._in_air) or self._mode in (FlightMode.LAND, FlightMode.TAKEOFF):
             self.refused_commands += 1
             return
-        self._sp_pos = [float(v) for v in setpoint.position_m]
-        self._sp_vel = [float(v) for v in setpoint.velocity_mps]
-        self._sp_acc = [float(v) for v in setpoint.acceleration_mps2]
+        self._sp_pos = setpoint.position_m.tolist()  # Python floats, as float(v) of each would give
+        self._sp_vel = setpoint.velocity_mps.tolist()
+        self._sp_acc = setpoint.acceleration_mps2.tolist()
         self._yaw_cmd = float(setpoint.yaw_rad)
         self._sp_time = self._t
         self._set_mode(FlightMode.OFFBOARD)
