@@ -249,13 +249,14 @@ class TeammateTable:
         )
         cap = params.covariance_radius_cap_m
         radii = np.minimum(self._radii[rows], cap)
+        since_stamp = now_s - self._stamps[rows]  # the plans' ages, negative for one stamped after now_s
         d_max = (
             params.teammate_d_max_base_m
             + min(own_cov_radius_m, cap)
             + radii
-            + teammate_age_term_m(now_s - self._stamps[rows], params)
+            + teammate_age_term_m(since_stamp, params)
         )
-        ages = np.maximum(now_s - self._stamps[rows], 0.0)
+        ages = np.maximum(since_stamp, 0.0)
         offsets = self._offsets[rows]
         mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max, 0, ages, offsets)
         if not extra:
