@@ -217,7 +217,7 @@ class TeammateTable:
 
     def fresh_count(self, since_s: float, *, in_formation: bool = True) -> int:
         """How many stored plans are stamped at or after since_s (only in-formation ones by default)."""
-        return sum(1 for _, stamp, flying in self._heard if stamp >= since_s and (flying or not in_formation))
+        return len(self.fresh_ids(since_s, in_formation=in_formation))  # one row per vehicle id
 
     def paths(
         self,
