@@ -20,29 +20,49 @@ def frozen_array(value, shape: tuple[int, ...], name: str) -> np.ndarray:
     """Return `value` as a read-only float64 array of `shape` (-1 = any length), or raise ValueError.
 
     A float64 array that is read-only already and owns its data is taken as it is (nobody holds a writable
-    view of it): the controller hands over the arrays it has just computed this way, without a copy.
+    view of it): the controller hands over the arrays it has just computed this way (`read_only`), without a
+    copy. Most fields of the messages built every tick are such arrays.
     """
-    if (
+    taken = (
         type(value) is np.ndarray
         and value.dtype == np.float64
         and not value.flags.writeable
         and value.base is None
-    ):
-        arr = value
-    else:
-        arr = np.array(value, dtype=float)
-    got = arr.shape
-    if got != shape and (
-        len(got) != len(shape) or any(s not in (-1, a) for s, a in zip(shape, got, strict=True))
-    ):
-        raise ValueError(f"{name} must have shape {shape}, got {got}")
-    if arr is not value:
+    )
+    arr = value if taken else np.array(value, dtype=float)
+    if not _fits(arr.shape, shape):
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    if not taken:
         arr.setflags(write=False)
     return arr
 
 
+def _fits(got: tuple[int, ...], shape: tuple[int, ...]) -> bool:
+    """Whether an array of shape `got` has `shape` (-1 = any length). A plain loop: it runs for every field
+    of every message."""
+    if got == shape:
+        return True
+    if len(got) != len(shape):
+        return False
+    for want, size in zip(shape, got, strict=True):
+        if want != -1 and want != size:
+            return False
+    return True
+
+
+def read_only(arr: np.ndarray) -> np.ndarray:
+    """Make `arr`, just computed and referenced by nobody else, read-only and return it: a message then takes
+    it as it is (`frozen_array`) instead of copying it."""
+    arr.setflags(write=False)
+    return arr
+
+
 def _freeze(obj, name: str, shape: tuple[int, ...]) -> None:
-    object.__setattr__(obj, name, frozen_array(getattr(obj, name), shape, name))
+    """Replace field `name` of frozen dataclass `obj` by its `frozen_array` (left alone when it is one)."""
+    value = getattr(obj, name)
+    arr = frozen_array(value, shape, name)
+    if arr is not value:
+        object.__setattr__(obj, name, arr)
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,8 +80,8 @@ class VehicleState:
     position_m: np.ndarray
     velocity_mps: np.ndarray
     yaw_rad: float = 0.0
-    position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
-    gps_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    position_cov_m2: np.ndarray = field(default_factory=lambda: read_only(np.eye(3) * 0.25))
+    gps_offset_m: np.ndarray = field(default_factory=lambda: read_only(np.zeros(3)))
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))
@@ -133,8 +153,8 @@ class HorizonPlan:
     positions_m: np.ndarray
     velocities_mps: np.ndarray
     in_formation: bool = True
-    position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
-    gps_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    position_cov_m2: np.ndarray = field(default_factory=lambda: read_only(np.eye(3) * 0.25))
+    gps_offset_m: np.ndarray = field(default_factory=lambda: read_only(np.zeros(3)))
 
     def __post_init__(self) -> None:
         _freeze(self, "positions_m", (-1, 3))
@@ -209,7 +229,7 @@ class ControlOutput:
     fault: str | None = None
     solver_iterations: int = 0
     solver_time_s: float = 0.0
-    waypoint_acceleration_mps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    waypoint_acceleration_mps2: np.ndarray = field(default_factory=lambda: read_only(np.zeros(3)))
 
     def __post_init__(self) -> None:
         _freeze(self, "waypoint_position_m", (3,))

@@ -141,6 +141,9 @@ class TeammateTable:
         self._radii = np.zeros(capacity)
         self._in_formation = np.zeros(capacity, dtype=np.bool_)
         self._row_ids = np.zeros(capacity, dtype=np.int64)
+        # (vehicle id, stamp, in formation) of each row as Python values: what the agent asks of the table
+        # every tick (fresh_count, fresh_ids), answered without numpy's per-call cost on a few rows.
+        self._heard: list[tuple[int, float, bool]] = []
 
     def _grow(self, capacity: int, length: int) -> None:
         """Re-allocate every column for `capacity` rows of `length` states, keeping the stored rows."""
@@ -165,11 +168,9 @@ class TeammateTable:
 
     def fresh_ids(self, since_s: float, *, in_formation: bool = True) -> set[int]:
         """Vehicle ids of the plans stamped at or after since_s (only in-formation ones by default)."""
-        n = self._count
-        fresh = self._stamps[:n] >= since_s
-        if in_formation:
-            fresh &= self._in_formation[:n]
-        return set(self._row_ids[:n][fresh].tolist())
+        return {
+            vid for vid, stamp, flying in self._heard if stamp >= since_s and (flying or not in_formation)
+        }
 
     def update(self, plan: HorizonPlan) -> str:
         """Store `plan` as its teammate's latest: "stored"; "older" (an older plan than the stored one, not an
@@ -196,6 +197,7 @@ class TeammateTable:
                 arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
             self._count += 1
             self._row_ids[row] = vid
+            self._heard.insert(row, (vid, plan.stamp_s, plan.in_formation))
             self._row_of = {int(v): r for r, v in enumerate(self._row_ids[: self._count].tolist())}
         row = self._row_of[vid]
         length = positions.shape[0]
@@ -209,16 +211,13 @@ class TeammateTable:
         self._stamps[row] = plan.stamp_s
         self._dts[row] = plan.dt_s
         self._in_formation[row] = plan.in_formation
+        self._heard[row] = (vid, float(self._stamps[row]), bool(self._in_formation[row]))
         self._offsets[row] = plan.gps_offset_m
         return "stored"
 
     def fresh_count(self, since_s: float, *, in_formation: bool = True) -> int:
         """How many stored plans are stamped at or after since_s (only in-formation ones by default)."""
-        n = self._count
-        fresh = self._stamps[:n] >= since_s
-        if in_formation:
-            fresh &= self._in_formation[:n]
-        return int(np.count_nonzero(fresh))
+        return len(self.fresh_ids(since_s, in_formation=in_formation))  # one row per vehicle id
 
     def paths(
         self,
@@ -250,13 +249,14 @@ class TeammateTable:
         )
         cap = params.covariance_radius_cap_m
         radii = np.minimum(self._radii[rows], cap)
+        since_stamp = now_s - self._stamps[rows]  # the plans' ages, negative for one stamped after now_s
         d_max = (
             params.teammate_d_max_base_m
             + min(own_cov_radius_m, cap)
             + radii
-            + teammate_age_term_m(now_s - self._stamps[rows], params)
+            + teammate_age_term_m(since_stamp, params)
         )
-        ages = np.maximum(now_s - self._stamps[rows], 0.0)
+        ages = np.maximum(since_stamp, 0.0)
         offsets = self._offsets[rows]
         mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max, 0, ages, offsets)
         if not extra:

@@ -45,6 +45,7 @@ from controller.messages import (
     PersonEstimate,
     SolveStatus,
     VehicleState,
+    read_only,
 )
 from controller.params import ControllerParams, FormationParams
 from controller.reference import plan_acceleration_at, plan_state_at
@@ -55,6 +56,8 @@ from vehicles.detect.converter import ConverterStats, DetectionConverter
 from vehicles.detect.pixels import CameraDetection
 
 Message = Detection | HorizonPlan
+
+_NO_OFFSET = read_only(np.zeros(3))  # the GPS offset of a MAV that does not estimate it (shared: read-only)
 
 
 class AgentRole(StrEnum):
@@ -171,6 +174,9 @@ class _Step:
     used_slot: bool = False
 
 
+_NOTHING = _Step()  # a tick that neither flies nor publishes a plan
+
+
 def hold_plan(
     *,
     state: AutopilotState,
@@ -185,11 +191,11 @@ def hold_plan(
         vehicle_id=state.vehicle_id,
         stamp_s=state.stamp_s,
         dt_s=params.mpc.dt_s,
-        positions_m=np.repeat(state.position_m[None, :], n, axis=0),
-        velocities_mps=np.zeros((n, 3)),
+        positions_m=read_only(np.repeat(state.position_m[None, :], n, axis=0)),
+        velocities_mps=read_only(np.zeros((n, 3))),
         in_formation=in_formation,
         position_cov_m2=state.position_cov_m2,
-        gps_offset_m=np.zeros(3) if gps_offset_m is None else gps_offset_m,
+        gps_offset_m=_NO_OFFSET if gps_offset_m is None else gps_offset_m,
     )
 
 
@@ -226,7 +232,11 @@ class Agent:
         self._last_person: PersonEstimate | None = None
         self._holding = True  # a MAV starts formation flight only once it has heard every teammate afresh
         self._counts = dict.fromkeys(AgentCounters.__dataclass_fields__, 0)
+        self._counted = tuple(self._counts.values())  # the counts as last reported (`_counters_now`)
+        self._counters = AgentCounters(**self._counts)
         self._offset = GpsOffsetEstimator(self._ap.gps_offset) if self._ap.gps_offset is not None else None
+        self._offset_now = _NO_OFFSET  # the estimator's offset (read-only) as of its `used` count below
+        self._offset_used = -1
         self._teammate_detection_s = -math.inf  # capture time of the latest teammate detection fused
 
     @property
@@ -249,7 +259,7 @@ class Agent:
         self._last_person = person
         since = now_s - self._ap.teammate_timeout_s  # plans stamped before are forgotten
         known = self._teammates.fresh_count(since)
-        step = _Step()
+        step = _NOTHING
         if last is not None and person is not None:
             step = _Step(control=last, plan=last.plan, setpoint=self._follow(now_s, last.plan, person))
         elif own is not None and inputs.role == AgentRole.FORMATION:
@@ -264,7 +274,7 @@ class Agent:
             person=person,
             outbox=self._outbox(now_s, detections, step.plan),
             tracker=self._tracker.stats(),
-            counters=AgentCounters(**self._counts),
+            counters=self._counters_now(),
             teammates_known=known,
             used_slot=step.used_slot,
             fault=step.fault,
@@ -273,8 +283,21 @@ class Agent:
         )
 
     def _offset_m(self) -> np.ndarray:
-        """(3,) this MAV's GPS offset estimate relative to its team (zeros without the estimate)."""
-        return self._offset.offset_m if self._offset is not None else np.zeros(3)
+        """(3,) this MAV's GPS offset estimate relative to its team (zeros without the estimate), read-only.
+        Copied from the estimator only when it took a residual since the last copy (its `used` count moved):
+        a few times a second, while every tick's messages carry it."""
+        est = self._offset
+        if est is not None and est.used != self._offset_used:
+            self._offset_used = est.used
+            self._offset_now = read_only(est.offset_m)
+        return self._offset_now
+
+    def _counters_now(self) -> AgentCounters:
+        """The counts as an `AgentCounters`, built anew only when one changed (most ticks change none)."""
+        values = tuple(self._counts.values())
+        if values != self._counted:
+            self._counted, self._counters = values, AgentCounters(**self._counts)
+        return self._counters
 
     def _take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
         """Keep teammates' plans, fuse their detections and this MAV's own (the camera's pixel detections
@@ -462,8 +485,9 @@ class Agent:
         dt = self._params.mpc.dt_s
         velocity = np.array([person.velocity_mps[0], person.velocity_mps[1], 0.0])
         drift = np.arange(n)[:, None] * dt * velocity[None, :]
+        velocities = read_only(np.repeat(velocity[None, :], n, axis=0))  # the same for every phantom
         d, h = inputs.formation.d_des_m, inputs.formation.h_des_m
-        own_offset = self._offset.offset_m if self._offset is not None else np.zeros(3)
+        own_offset = self._offset_m()
         out = []
         for vid, bearing in inputs.roster:
             if vid == self.vehicle_id or vid in heard_ids:
@@ -476,8 +500,8 @@ class Agent:
                     vehicle_id=vid,
                     stamp_s=now_s,
                     dt_s=dt,
-                    positions_m=slot[None, :] + drift,
-                    velocities_mps=np.repeat(velocity[None, :], n, axis=0),
+                    positions_m=read_only(slot[None, :] + drift),
+                    velocities_mps=velocities,
                     in_formation=True,
                     gps_offset_m=own_offset,  # placed in our own frame
                 )

@@ -7,13 +7,14 @@ ENU world frame; conversion to NED/geodetic happens inside the PX4 back-end only
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Protocol
 
 import numpy as np
 
-from controller.messages import _freeze
+from controller.messages import _freeze, read_only
 
 
 class FlightMode(str, Enum):  # noqa: UP042 - str() and format() must stay as they are in reports
@@ -62,7 +63,7 @@ class AutopilotState:
     pitch_rad: float = 0.0
     battery_fraction: float | None = None
     healthy: bool = True
-    position_cov_m2: np.ndarray = field(default_factory=lambda: np.eye(3) * 0.25)
+    position_cov_m2: np.ndarray = field(default_factory=lambda: read_only(np.eye(3) * 0.25))
     link_lost: bool = False
     released: bool = False
     autopilot_mode: str = ""
@@ -87,18 +88,20 @@ class Setpoint:
     position_m: np.ndarray
     velocity_mps: np.ndarray
     yaw_rad: float
-    acceleration_mps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    acceleration_mps2: np.ndarray = field(default_factory=lambda: read_only(np.zeros(3)))
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", (3,))
         _freeze(self, "velocity_mps", (3,))
         _freeze(self, "acceleration_mps2", (3,))
-        if not (
-            np.all(np.isfinite(self.position_m))
-            and np.all(np.isfinite(self.velocity_mps))
-            and np.all(np.isfinite(self.acceleration_mps2))
-            and np.isfinite(self.yaw_rad)
-        ):
+        # Plain floats: one set-point a tick per MAV, and numpy's per-call cost is most of a 10-value check.
+        values = (
+            *self.position_m.tolist(),
+            *self.velocity_mps.tolist(),
+            *self.acceleration_mps2.tolist(),
+            self.yaw_rad,
+        )
+        if not all(map(math.isfinite, values)):
             raise ValueError("a set-point must be finite")
 
 

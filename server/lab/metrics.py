@@ -41,6 +41,7 @@ flight_ticks (every tick, the safety minima's). A metric with no data is null.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -250,9 +251,18 @@ def closest_pair(points_m: np.ndarray) -> tuple[float, int, int]:
         return math.inf, -1, -1
     diff = points_m[:, None, :] - points_m[None, :, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
-    rows, cols = np.triu_indices(len(points_m), 1)
+    rows, cols = _pairs(len(points_m))
     best = int(np.argmin(dist[rows, cols]))
     return float(dist[rows[best], cols[best]]), int(rows[best]), int(cols[best])
+
+
+@functools.cache
+def _pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """np.triu_indices(k, 1), read-only: the pairs of k points, asked twice a tick for the same k."""
+    rows, cols = np.triu_indices(k, 1)
+    rows.setflags(write=False)
+    cols.setflags(write=False)
+    return rows, cols
 
 
 def min_pair_distance_m(points_m: np.ndarray) -> float:

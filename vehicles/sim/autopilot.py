@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from controller.angles import wrap_angle
-from controller.messages import frozen_array
+from controller.messages import frozen_array, read_only
 from vehicles.autopilot import AutopilotState, FlightMode, Setpoint
 from vehicles.sim.gps_drift import GpsDrift
 from vehicles.world import BodyPose
@@ -138,13 +138,17 @@ class SimAutopilot:
                 self._cut_state = _with_link_lost(self._cut_state)
             return self._cut_state
         if self._state is None:
-            off, dv = self._drift.offset_m, self._drift.velocity_mps
+            off, dv = self._drift.offset_m.tolist(), self._drift.velocity_mps.tolist()
             roll, pitch = self._attitude()
             self._state = AutopilotState(
                 vehicle_id=self.vehicle_id,
                 stamp_s=self._t,
-                position_m=np.array([self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]]),
-                velocity_mps=np.array([self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]]),
+                position_m=read_only(
+                    np.array([self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]])
+                ),
+                velocity_mps=read_only(
+                    np.array([self._vel[0] + dv[0], self._vel[1] + dv[1], self._vel[2] + dv[2]])
+                ),
                 yaw_rad=self._yaw,
                 armed=self._armed,
                 in_air=self._in_air,
@@ -170,9 +174,9 @@ class SimAutopilot:
         if not (self._armed and self._in_air) or self._mode in (FlightMode.LAND, FlightMode.TAKEOFF):
             self.refused_commands += 1
             return
-        self._sp_pos = [float(v) for v in setpoint.position_m]
-        self._sp_vel = [float(v) for v in setpoint.velocity_mps]
-        self._sp_acc = [float(v) for v in setpoint.acceleration_mps2]
+        self._sp_pos = setpoint.position_m.tolist()  # Python floats, as float(v) of each would give
+        self._sp_vel = setpoint.velocity_mps.tolist()
+        self._sp_acc = setpoint.acceleration_mps2.tolist()
         self._yaw_cmd = float(setpoint.yaw_rad)
         self._sp_time = self._t
         self._set_mode(FlightMode.OFFBOARD)
@@ -301,7 +305,9 @@ class SimAutopilot:
         self._set_mode(FlightMode.LAND)
 
     def _believed(self) -> list[float]:
-        off = self._drift.offset_m
+        """The position the GPS reports. Python floats, not numpy scalars: the same sums, and what the
+        physics step computes from them stays in (faster) plain float arithmetic, rounded alike."""
+        off = self._drift.offset_m.tolist()
         return [self._pos[0] + off[0], self._pos[1] + off[1], self._pos[2] + off[2]]
 
     def _attitude(self) -> tuple[float, float]:
