@@ -2,8 +2,8 @@
 loop needs it.
 
 The kernels (numba, `cache=True`) compile on their first call and are cached on disk beside their modules; a
-fresh install compiles them once (about 10 s of CPU, docs/fast-core.md), later starts load them in well under
-a second. A live ground station calls `warm_up()` before its first control tick, so that tick is not the one
+fresh install compiles them once (about 20 s of CPU, docs/fast-core.md), later starts load them in about
+1.5 s. A live ground station calls `warm_up()` before its first control tick, so that tick is not the one
 that pays.
 """
 
