@@ -48,7 +48,13 @@ import numpy as np
 
 from controller.fields import ObstacleSet, TeammatePaths
 from controller.mpc import HalfPlanes
-from controller.separation_kernel import empty_rows, separation_rows_kernel
+from controller.separation_kernel import (
+    closest_teammate,
+    empty_rows,
+    floor_rows_kernel,
+    obstacle_rows_kernel,
+    teammate_rows_kernel,
+)
 
 
 @dataclass(frozen=True)
@@ -404,29 +410,23 @@ def _reference_rows(
 def _compiled_rows(
     own_path, own_vel, mates, cooperative, inflation, obstacles, own_cov_radius, dt, own_id, params, floor
 ):
-    """The same as `_reference_rows`, by separation_kernel.py's kernels in one call."""
+    """The same as `_reference_rows`, by separation_kernel.py's kernels, each writing its rows after the
+    previous one's into one set of arrays (no concatenation)."""
     own_path = np.ascontiguousarray(own_path, dtype=float)
+    own_vel = np.ascontiguousarray(own_vel, dtype=float)
     steps = own_path.shape[0]
     count = mates.count
     out_steps, out_normals, out_offsets = empty_rows((count + obstacles.count + 1) * steps)
     dist = np.empty((count, steps))
-    t, o, f, closest_index, closest = separation_rows_kernel(
+    t = teammate_rows_kernel(
         own_path,
-        np.ascontiguousarray(own_vel, dtype=float),
+        own_vel,
         np.ascontiguousarray(mates.positions_m, dtype=float),
         np.asarray(mates.vehicle_ids, dtype=np.int64),
         np.asarray(cooperative, dtype=np.bool_),
         params.separation_m + np.asarray(inflation, dtype=float),
         float(dt),
         int(own_id),
-        np.ascontiguousarray(obstacles.centers_m, dtype=float),
-        np.asarray(obstacles.radii_m, dtype=float),
-        np.asarray(obstacles.heights_m, dtype=float),
-        trunk_margin_m(params, float(own_cov_radius)),
-        params.obstacle_clearance_m,
-        params.obstacle_row_weight,
-        math.nan if floor is None else float(floor),
-        params.floor_row_weight,
         params.step_brake_mps2,
         params.brake_mps2,
         params.brake_margin_max_m,
@@ -436,5 +436,35 @@ def _compiled_rows(
         out_offsets,
         dist,
     )
+    o = obstacle_rows_kernel(
+        own_path,
+        own_vel,
+        np.ascontiguousarray(obstacles.centers_m, dtype=float),
+        np.asarray(obstacles.radii_m, dtype=float),
+        np.asarray(obstacles.heights_m, dtype=float),
+        trunk_margin_m(params, float(own_cov_radius)),
+        params.obstacle_clearance_m,
+        params.step_brake_mps2,
+        params.brake_mps2,
+        params.brake_margin_max_m,
+        params.row_reach_m,
+        params.obstacle_row_weight,
+        out_steps[t:],
+        out_normals[t:],
+        out_offsets[t:],
+    )
+    f = 0
+    if floor is not None:
+        n = t + o
+        f = floor_rows_kernel(
+            own_path,
+            float(floor),
+            params.row_reach_m,
+            params.floor_row_weight,
+            out_steps[n:],
+            out_normals[n:],
+            out_offsets[n:],
+        )
+    closest_index, closest = closest_teammate(dist)
     rows = t + o + f
     return out_steps[:rows], out_normals[:rows], out_offsets[:rows], (t, o, f), closest_index, closest

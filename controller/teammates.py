@@ -197,7 +197,7 @@ class TeammateTable:
                 arr[row + 1 : self._count + 1] = arr[row : self._count].copy()
             self._count += 1
             self._row_ids[row] = vid
-            self._heard.insert(row, (vid, plan.stamp_s, plan.in_formation))
+            self._heard.insert(row, (vid, -math.inf, False))  # filled in below, with the other columns
             self._row_of = {int(v): r for r, v in enumerate(self._row_ids[: self._count].tolist())}
         row = self._row_of[vid]
         length = positions.shape[0]
@@ -211,7 +211,7 @@ class TeammateTable:
         self._stamps[row] = plan.stamp_s
         self._dts[row] = plan.dt_s
         self._in_formation[row] = plan.in_formation
-        self._heard[row] = (vid, float(self._stamps[row]), bool(self._in_formation[row]))
+        self._heard[row] = (vid, float(plan.stamp_s), bool(plan.in_formation))
         self._offsets[row] = plan.gps_offset_m
         return "stored"
 
