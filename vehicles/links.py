@@ -91,14 +91,17 @@ class SimLinks:
         if self._p.loss >= 1.0:
             self._dropped += n
             return
-        keep = self._rng.random(n) >= self._p.loss
-        delays = self._p.latency_s + self._p.jitter_s * self._rng.random(n)
-        for receiver, ok, delay in zip(receivers, keep, delays, strict=True):
-            if not ok:
-                self._dropped += 1
-                continue
-            self._seq += 1
-            heapq.heappush(self._queues[receiver], (now_s + float(delay), self._seq, message))
+        # Drawn as numpy draws them, then taken as Python floats (the same arithmetic as on the arrays): every
+        # message goes out to every teammate, and numpy's per-call cost would be most of this loop.
+        p, queues, seq = self._p, self._queues, self._seq
+        draws = self._rng.random(n).tolist()
+        jitters = self._rng.random(n).tolist()
+        for receiver, draw, jitter in zip(receivers, draws, jitters, strict=True):
+            if draw >= p.loss:
+                seq += 1
+                heapq.heappush(queues[receiver], (now_s + (p.latency_s + p.jitter_s * jitter), seq, message))
+        self._dropped += n - (seq - self._seq)
+        self._seq = seq
 
     def receive(self, now_s: float, receiver_id: int) -> tuple[Message, ...]:
         queue = self._queues.get(receiver_id)
