@@ -268,7 +268,7 @@ class PersonTracker:
         now_s, if given, is the receiver's current time: a detection stamped more than max_future_s after it
         is INVALID.
         """
-        checked = _checked(detection)
+        checked = _checked_message(detection) if type(detection) is Detection else _checked(detection)
         if checked is None:
             return self._count(Verdict.INVALID)
         key, z, R = checked
@@ -345,20 +345,35 @@ class PersonTracker:
 
     def _within_gate(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> bool:
         """Whether z (3, 1) lies within gate_sigma (Mahalanobis) of the predicted state x (6, 1), P (6, 6)."""
-        d2 = _mahalanobis_sq((P[:3, :3] + R).tolist(), (z - x[:3]).ravel().tolist())
-        return d2 <= self.params.gate_sigma**2
+        return _gate_distance_sq(x, P, z, R) <= self.params.gate_sigma**2
 
 
-def _mahalanobis_sq(S: list[list[float]], y: list[float]) -> float:
-    """y^T S^-1 y for a symmetric 3x3 S (nested lists) by its adjugate; inf when S is not positive definite.
-    Plain floats: for 3x3 this is several times faster than numpy.linalg."""
-    (a, b, c), (_, d, e), (_, _, f) = S
+@numba.njit(cache=True)
+def _gate_distance_sq(x, P, z, R):  # pragma: no cover - compiled
+    """`_mahalanobis_sq` of z (3, 1) from the predicted x (6, 1), P (6, 6), with S = P[:3, :3] + R (its upper
+    triangle) and y = z - x[:3]: one compiled call, as every detection of every teammate is gated."""
+    return _mahalanobis_sq(
+        P[0, 0] + R[0, 0],
+        P[0, 1] + R[0, 1],
+        P[0, 2] + R[0, 2],
+        P[1, 1] + R[1, 1],
+        P[1, 2] + R[1, 2],
+        P[2, 2] + R[2, 2],
+        z[0, 0] - x[0, 0],
+        z[1, 0] - x[1, 0],
+        z[2, 0] - x[2, 0],
+    )
+
+
+@numba.njit(cache=True)
+def _mahalanobis_sq(a, b, c, d, e, f, u, v, w):  # pragma: no cover - compiled; tested against its py_func
+    """y^T S^-1 y for the symmetric S = [[a, b, c], [b, d, e], [c, e, f]] and y = (u, v, w) by the adjugate of
+    S; inf when S is not positive definite. Plain floats: for 3x3 this is far cheaper than numpy.linalg."""
     adj_aa, adj_ab, adj_ac = d * f - e * e, c * e - b * f, b * e - c * d
     det = a * adj_aa + b * adj_ab + c * adj_ac
     if not (a > 0.0 and a * d - b * b > 0.0 and det > 0.0):
-        return float("inf")
+        return math.inf
     adj_bb, adj_bc, adj_cc = a * f - c * c, b * c - a * e, a * d - b * b
-    u, v, w = y
     quad = (
         adj_aa * u * u
         + adj_bb * v * v
@@ -375,8 +390,16 @@ def _is_spd(m: list[list[float]]) -> bool:
     return a > 0.0 and a * d - b * b > 0.0 and det > 0.0
 
 
+@functools.lru_cache(maxsize=256)
+def _checked_message(detection: Detection) -> tuple[tuple[float, int], np.ndarray, np.ndarray] | None:
+    """`_checked` of a Detection, remembered: the links hand the same Detection object to every teammate (each
+    of K trackers checks it), and a Detection cannot change (frozen, its arrays read-only)."""
+    return _checked(detection)
+
+
 def _checked(detection: Detection) -> tuple[tuple[float, int], np.ndarray, np.ndarray] | None:
-    """(sort key (stamp s, source id), z (3, 1), R (3, 3)) of a usable detection, or None."""
+    """(sort key (stamp s, source id), z (3, 1), R (3, 3)) of a usable detection, or None; z and R read-only
+    (`_checked_message` hands them to every tracker)."""
     try:
         key = (float(detection.stamp_s), int(detection.source_id))
         z_list = np.asarray(detection.position_m, dtype=float).reshape(3).tolist()
@@ -393,4 +416,4 @@ def _checked(detection: Detection) -> tuple[tuple[float, int], np.ndarray, np.nd
     sym = [[a, b, c], [b, e, f], [c, f, i]]
     if not _is_spd(sym):
         return None
-    return key, np.array(z_list).reshape(3, 1), np.array(sym)
+    return key, read_only(np.array(z_list).reshape(3, 1)), read_only(np.array(sym))

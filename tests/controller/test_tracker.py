@@ -10,7 +10,14 @@ from scipy import stats
 
 from controller.measurement import NoiseParams, sample_detection
 from controller.messages import Detection
-from controller.tracker import PersonTracker, TrackerParams, Verdict, transition
+from controller.tracker import (
+    PersonTracker,
+    TrackerParams,
+    Verdict,
+    _gate_distance_sq,
+    _mahalanobis_sq,
+    transition,
+)
 
 RUNS = 20
 GRID_S = np.arange(10.0, 119.0, 5.0)  # 22 evaluation times after a 10 s burn-in, 5 s apart
@@ -294,6 +301,42 @@ def test_late_outlier_is_gated_against_the_state_at_its_time():
     far = _det(old.stamp_s + 0.01, old.position_m + np.array([30.0, 0.0, 0.0]), old.cov_m2, source=9)
     assert tracker.update(far) is Verdict.GATED
     assert _same_estimate(tracker.estimate(25.0), before)
+
+
+def test_compiled_gate_distance_is_the_python_formula_to_the_bit():
+    """_gate_distance_sq (one compiled call) against _mahalanobis_sq's Python source on the same S and y, on
+    3,000 random gates: well and badly conditioned, indefinite and singular S; and against numpy's solve."""
+    rng = np.random.default_rng(3)
+    finite = 0
+    for i in range(3000):
+        a = rng.normal(size=(6, 6)) * rng.uniform(0.01, 10.0)
+        P = a @ a.T + rng.uniform(0.0, 1.0) * np.eye(6)
+        b = rng.normal(size=(3, 3))
+        R = b @ b.T * rng.uniform(1e-6, 5.0)
+        if i % 5 == 0:
+            R = R - rng.uniform(0.0, 3.0) * np.abs(np.linalg.eigvalsh(P[:3, :3] + R)).max() * np.eye(3)
+        if i % 7 == 0:
+            R = -P[:3, :3]  # S singular
+        x, z = rng.normal(size=(6, 1)) * 10.0, rng.normal(size=(3, 1)) * 10.0
+        S, y = (P[:3, :3] + R).tolist(), (z - x[:3]).ravel().tolist()
+        want = _mahalanobis_sq.py_func(S[0][0], S[0][1], S[0][2], S[1][1], S[1][2], S[2][2], *y)
+        got = _gate_distance_sq(x, P, z, R)
+        assert got == want
+        if np.isfinite(got):
+            finite += 1
+            dy = np.asarray(y)
+            assert got == pytest.approx(float(dy @ np.linalg.solve(np.asarray(S), dy)), rel=1e-6)
+    assert 1500 < finite < 3000
+
+
+def test_a_detection_shared_by_trackers_is_checked_once_and_fused_by_each():
+    """The links hand one Detection object to every teammate; its checked form is shared, read-only."""
+    _, _, dets = _detections(5, duration_s=3.0)
+    a, b = PersonTracker(), PersonTracker()
+    assert [a.update(d) for d in dets] == [b.update(d) for d in dets]
+    assert a._cache[-1].z is b._cache[-1].z and not a._cache[-1].z.flags.writeable
+    assert not a._cache[-1].R.flags.writeable
+    assert _same_estimate(a.estimate(3.0), b.estimate(3.0))
 
 
 @pytest.mark.parametrize(

@@ -15,6 +15,7 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         mpc_kernels.half_plane_rows,
         teammates.align_rows,
         tracker._predicted,
+        tracker._gate_distance_sq,
         dual_active_set.solve_identity_qp,
     )
     assert all(kernel.signatures for kernel in kernels)
