@@ -9,6 +9,7 @@ compiled kernel. Same numbers as `teammate_paths` (tests/controller/test_teammat
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -63,6 +64,22 @@ def _all_below(values, limit):  # pragma: no cover - compiled
             if not abs(v) < limit:
                 return False
     return True
+
+
+@functools.lru_cache(maxsize=256)
+def _usable(plan: HorizonPlan) -> bool:
+    """Whether a plan's numbers can be stored: a finite stamp, a finite step > 0, at least 2 states, every
+    position and covariance entry finite and within SANE_ABS. Remembered: the links hand the same plan
+    object to every teammate (each of K tables checks it), and a plan cannot change (frozen, read-only
+    arrays)."""
+    return (
+        math.isfinite(plan.stamp_s)
+        and math.isfinite(plan.dt_s)
+        and plan.dt_s > 0.0
+        and plan.positions_m.shape[0] >= 2
+        and _all_below(plan.positions_m, SANE_ABS)
+        and _all_below(plan.position_cov_m2, SANE_ABS)
+    )
 
 
 class TeammateView:
@@ -177,14 +194,9 @@ class TeammateTable:
         error: nothing changes); "refused" (ours, or unusable: non-finite or beyond 1000 km numbers, a
         non-positive step, fewer than 2 states)."""
         vid = int(plan.vehicle_id)
-        positions, cov = plan.positions_m, plan.position_cov_m2
-        if (
-            vid == self._own
-            or not (math.isfinite(plan.stamp_s) and math.isfinite(plan.dt_s) and plan.dt_s > 0.0)
-            or positions.shape[0] < 2
-            or not (_all_below(positions, SANE_ABS) and _all_below(cov, SANE_ABS))
-        ):
+        if vid == self._own or not _usable(plan):
             return "refused"
+        positions, cov = plan.positions_m, plan.position_cov_m2
         old = self._plans.get(vid)
         if old is not None and plan.stamp_s < old.stamp_s:
             return "older"
