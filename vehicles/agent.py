@@ -546,7 +546,8 @@ class Agent:
                 self._teammate_detection_s = max(self._teammate_detection_s, float(msg.stamp_s))
         elif isinstance(msg, HorizonPlan) and msg.vehicle_id != self.vehicle_id:
             limit = self._offset.params.max_offset_m if self._offset is not None else math.inf
-            if not all(abs(v) <= limit for v in msg.gps_offset_m.tolist()):  # NaN included
+            x, y, z = msg.gps_offset_m.tolist()  # (3,): HorizonPlan checks it
+            if not (abs(x) <= limit and abs(y) <= limit and abs(z) <= limit):  # NaN included
                 counts["rejected_messages"] += 1
                 return
             if self._teammates.update(msg) == "refused":  # non-finite numbers, a bad step, a wild covariance
