@@ -45,7 +45,18 @@ def body_rotation(*, yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0
     yaw_rad: ENU heading; pitch_rad > 0 nose up and roll_rad > 0 right side down (the aviation sense, so the
     numbers mean the same as PX4's): R = Rz(yaw) Ry(-pitch) Rx(roll) for forward-left-up body axes.
     """
-    return Rotation.from_euler("ZYX", [yaw_rad, -pitch_rad, roll_rad]).as_matrix()
+    return body_rotations([(yaw_rad, pitch_rad, roll_rad)])[0]
+
+
+def body_rotations(attitudes: Sequence[tuple[float, float, float]]) -> np.ndarray:
+    """(N, 3, 3) the body_rotation of each (yaw_rad, pitch_rad, roll_rad), by one call of scipy's.
+
+    A Rotation costs some 15 us of Python per call, whatever N, and computes each row of a stack exactly as
+    it computes a single rotation (tests/vehicles/test_camera.py holds it to the bit), so a world taking
+    several frames at once makes their rotations together.
+    """
+    angles = np.array([[yaw, -pitch, roll] for yaw, pitch, roll in attitudes], dtype=float).reshape(-1, 3)
+    return Rotation.from_euler("ZYX", angles).as_matrix()
 
 
 def attitude_from_acceleration(
@@ -86,8 +97,16 @@ def camera_pose(
 ) -> CameraPose:
     """The camera's pose for a body at body_position_m (3,) with the given attitude."""
     r_wb = body_rotation(yaw_rad=yaw_rad, pitch_rad=pitch_rad, roll_rad=roll_rad)
-    rotation = _camera_in_body(params.pitch_down_rad) @ r_wb.T
-    position = np.asarray(body_position_m, dtype=float) + r_wb[:, 0] * params.offset_forward_m
+    return mounted_camera_pose(body_position_m=body_position_m, body_to_world=r_wb, params=params)
+
+
+def mounted_camera_pose(
+    *, body_position_m: np.ndarray, body_to_world: np.ndarray, params: CameraParams = CameraParams()
+) -> CameraPose:
+    """The camera's pose for a body at body_position_m (3,) turned by body_to_world (3, 3), body_rotation's
+    matrix."""
+    rotation = _camera_in_body(params.pitch_down_rad) @ body_to_world.T
+    position = np.asarray(body_position_m, dtype=float) + body_to_world[:, 0] * params.offset_forward_m
     return CameraPose(position_m=position, rotation=rotation)
 
 
