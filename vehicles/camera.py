@@ -8,13 +8,15 @@ top-left corner; camera frame x right, y down, z along the optical axis.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from controller.messages import Obstacle
+from controller.messages import Obstacle, read_only
 
 
 @dataclass(frozen=True)
@@ -43,7 +45,18 @@ def body_rotation(*, yaw_rad: float, pitch_rad: float = 0.0, roll_rad: float = 0
     yaw_rad: ENU heading; pitch_rad > 0 nose up and roll_rad > 0 right side down (the aviation sense, so the
     numbers mean the same as PX4's): R = Rz(yaw) Ry(-pitch) Rx(roll) for forward-left-up body axes.
     """
-    return Rotation.from_euler("ZYX", [yaw_rad, -pitch_rad, roll_rad]).as_matrix()
+    return body_rotations([(yaw_rad, pitch_rad, roll_rad)])[0]
+
+
+def body_rotations(attitudes: Sequence[tuple[float, float, float]]) -> np.ndarray:
+    """(N, 3, 3) the body_rotation of each (yaw_rad, pitch_rad, roll_rad), by one call of scipy's.
+
+    A Rotation costs some 15 us of Python per call, whatever N, and computes each row of a stack exactly as
+    it computes a single rotation (tests/vehicles/test_camera.py holds it to the bit), so a world taking
+    several frames at once makes their rotations together.
+    """
+    angles = np.array([[yaw, -pitch, roll] for yaw, pitch, roll in attitudes], dtype=float).reshape(-1, 3)
+    return Rotation.from_euler("ZYX", angles).as_matrix()
 
 
 def attitude_from_acceleration(
@@ -84,12 +97,30 @@ def camera_pose(
 ) -> CameraPose:
     """The camera's pose for a body at body_position_m (3,) with the given attitude."""
     r_wb = body_rotation(yaw_rad=yaw_rad, pitch_rad=pitch_rad, roll_rad=roll_rad)
-    c, s = math.cos(params.pitch_down_rad), math.sin(params.pitch_down_rad)
-    # Camera axes in body (forward-left-up) coordinates: optical axis pitched down, image down, image right.
-    cam_in_body = np.array([[0.0, -1.0, 0.0], [-s, 0.0, -c], [c, 0.0, -s]])
-    rotation = cam_in_body @ r_wb.T
-    position = np.asarray(body_position_m, dtype=float) + r_wb[:, 0] * params.offset_forward_m
+    return mounted_camera_pose(body_position_m=body_position_m, body_to_world=r_wb, params=params)
+
+
+def mounted_camera_pose(
+    *, body_position_m: np.ndarray, body_to_world: np.ndarray, params: CameraParams = CameraParams()
+) -> CameraPose:
+    """The camera's pose for a body at body_position_m (3,) turned by body_to_world (3, 3), body_rotation's
+    matrix."""
+    rotation = _camera_in_body(params.pitch_down_rad) @ body_to_world.T
+    position = np.asarray(body_position_m, dtype=float) + body_to_world[:, 0] * params.offset_forward_m
     return CameraPose(position_m=position, rotation=rotation)
+
+
+@functools.cache
+def _camera_in_body(pitch_down_rad: float) -> np.ndarray:
+    """(3, 3) the camera's axes in body (forward-left-up) coordinates: optical axis pitched down, image down,
+    image right. Made once per mount angle (read-only), as every frame of every camera asks for it."""
+    c, s = math.cos(pitch_down_rad), math.sin(pitch_down_rad)
+    return read_only(np.array([[0.0, -1.0, 0.0], [-s, 0.0, -c], [c, 0.0, -s]]))
+
+
+def _camera_frame(points_m: np.ndarray, pose: CameraPose) -> np.ndarray:
+    """(M, 3) world points (M, 3) in the camera frame: x right, y down, z the depth along the optical axis."""
+    return (np.asarray(points_m, dtype=float) - pose.position_m) @ pose.rotation.T
 
 
 def project(
@@ -99,27 +130,32 @@ def project(
 
     Points behind the camera (depth <= 0) get NaN pixels.
     """
-    pc = (np.asarray(points_m, dtype=float) - pose.position_m) @ pose.rotation.T
-    depth = pc[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        safe = np.where(depth > 1e-9, depth, np.nan)
-        u = params.fx_px * pc[:, 0] / safe + params.cx_px
-        v = params.fy_px * pc[:, 1] / safe + params.cy_px
-    return np.stack([u, v], axis=1), depth
+    pc = _camera_frame(points_m, pose)
+    pixels = [_pixel(point, params) for point in pc.tolist()]
+    return np.array(pixels, dtype=float).reshape(-1, 2), pc[:, 2]
+
+
+def _pixel(point: Sequence[float], params: CameraParams) -> tuple[float, float]:
+    """(u, v) of the camera-frame point (x, y, depth), NaN behind the camera (depth <= 1e-9). Plain floats:
+    a frame projects three points, and numpy's per-call cost was most of it; the operations are numpy's
+    elementwise ones, in the same order, so the pixels are the same to the bit."""
+    x, y, depth = point
+    if not depth > 1e-9:
+        return math.nan, math.nan
+    return params.fx_px * x / depth + params.cx_px, params.fy_px * y / depth + params.cy_px
 
 
 def inside_image(pixels: np.ndarray, params: CameraParams = CameraParams()) -> np.ndarray:
     """(M,) bool: finite pixels (M, 2) inside [0, width] x [0, height]."""
-    u, v = pixels[:, 0], pixels[:, 1]
-    with np.errstate(invalid="ignore"):
-        return (
-            np.isfinite(u)
-            & np.isfinite(v)
-            & (u >= 0.0)
-            & (u <= params.width_px)
-            & (v >= 0.0)
-            & (v <= params.height_px)
-        )
+    return np.array([_inside(pixel, params) for pixel in np.asarray(pixels).tolist()], dtype=bool)
+
+
+def _inside(pixel: Sequence[float], params: CameraParams) -> bool:
+    """Whether pixel (u, v) is finite and inside [0, width] x [0, height]."""
+    u, v = pixel
+    return (
+        math.isfinite(u) and math.isfinite(v) and 0.0 <= u <= params.width_px and 0.0 <= v <= params.height_px
+    )
 
 
 def line_of_sight_clear(a_m: np.ndarray, b_m: np.ndarray, obstacles: tuple[Obstacle, ...]) -> bool:
@@ -131,9 +167,7 @@ def line_of_sight_clear(a_m: np.ndarray, b_m: np.ndarray, obstacles: tuple[Obsta
     """
     if not obstacles:
         return True
-    centers = np.array([o.center_m for o in obstacles])
-    radii = np.array([o.radius_m for o in obstacles])
-    tops = np.array([o.height_m for o in obstacles])
+    centers, radii, tops = _trunks(obstacles)
     d = b_m[:2] - a_m[:2]
     dd = float(d @ d)
     if dd < 1e-12:
@@ -144,6 +178,17 @@ def line_of_sight_clear(a_m: np.ndarray, b_m: np.ndarray, obstacles: tuple[Obsta
     dist = np.hypot(closest[:, 0] - centers[:, 0], closest[:, 1] - centers[:, 1])
     z = a_m[2] + t * (b_m[2] - a_m[2])
     return not bool(np.any((dist < radii) & (z < tops)))
+
+
+@functools.lru_cache(maxsize=16)
+def _trunks(obstacles: tuple[Obstacle, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centres (M, 2), radii (M,) and tops (M,) of the obstacles, made once per tuple of them (an obstacle
+    hashes by identity): a world's trunks stand still, and building these was half of every line-of-sight
+    check."""
+    centers = read_only(np.array([o.center_m for o in obstacles]))
+    radii = read_only(np.array([o.radius_m for o in obstacles]))
+    tops = read_only(np.array([o.height_m for o in obstacles]))
+    return centers, radii, tops
 
 
 @dataclass(frozen=True, eq=False)
@@ -171,9 +216,10 @@ def view_person(
     params: CameraParams = CameraParams(),
 ) -> FrameView:
     """Project the person's centre, feet and head (each (3,)) and check the line of sight to the centre."""
-    pixels, _ = project(np.stack([center_m, feet_m, head_m]), pose, params)
-    inside = inside_image(pixels, params)
-    in_frame = bool(inside[1] and inside[2])
+    center, feet, head = _camera_frame(np.stack([center_m, feet_m, head_m]), pose).tolist()
+    u, v = _pixel(center, params)
+    in_frame = _inside(_pixel(feet, params), params) and _inside(_pixel(head, params), params)
     visible = in_frame and line_of_sight_clear(pose.position_m, np.asarray(center_m, dtype=float), obstacles)
-    offset = float(np.hypot(*(pixels[0] - params.center_px)))
-    return FrameView(in_frame=in_frame, visible=visible, center_px=pixels[0], center_offset_px=offset)
+    cu, cv = params.center_px.tolist()
+    offset = float(np.hypot(u - cu, v - cv))
+    return FrameView(in_frame=in_frame, visible=visible, center_px=np.array([u, v]), center_offset_px=offset)

@@ -4,12 +4,14 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from controller.messages import Obstacle
 from vehicles.camera import (
     CameraParams,
     attitude_from_acceleration,
     body_rotation,
+    body_rotations,
     camera_pose,
     inside_image,
     line_of_sight_clear,
@@ -129,3 +131,19 @@ def test_body_rotation_is_yaw_then_pitch_then_roll_in_the_aviation_sense():
     np.testing.assert_allclose(rotation, rz @ ry @ rx, atol=1e-12)
     nose = body_rotation(yaw_rad=0.0, pitch_rad=0.1)[:, 0]
     assert nose[2] > 0.0  # pitch > 0 lifts the nose
+
+
+def test_rotations_made_together_are_each_single_rotation_to_the_bit():
+    # The simulated world makes the rotations of a step's frames in one scipy call (body_rotations); each must
+    # be the matrix a single Rotation.from_euler gives, bit for bit, or the reports would change.
+    rng = np.random.default_rng(11)
+    for count in (1, 2, 3, 7, 16, 40) * 20:
+        scale = rng.choice([1e-9, 0.05, 0.5, 1.5], size=(count, 2))
+        attitudes = np.column_stack(
+            [rng.uniform(-4.0, 4.0, count), *(rng.uniform(-1.0, 1.0, (2, count)) * scale.T)]
+        ).tolist()
+        together = body_rotations(attitudes)
+        for (yaw, pitch, roll), matrix in zip(attitudes, together, strict=True):
+            single = Rotation.from_euler("ZYX", [yaw, -pitch, roll]).as_matrix()
+            assert matrix.tobytes() == single.tobytes()
+            assert matrix.tobytes() == body_rotation(yaw_rad=yaw, pitch_rad=pitch, roll_rad=roll).tobytes()

@@ -7,12 +7,15 @@ the body centre, 0.9 m above flat ground at z = 0; the person is 1.75 m tall (fe
 
 from __future__ import annotations
 
+import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from controller.angles import wrap_angle
+from controller.messages import read_only
 from vehicles.world import PERSON_CENTRE_HEIGHT_M, PersonTruth
 
 STAND_STILL_S = 10.0  # the paper's person stands at the origin for 10 s before walking
@@ -24,11 +27,13 @@ RANDOM_ARENA_RADIUS_M = 11.0
 PERSON_MODES = ("paper", "random", "still")  # the models below, by name
 
 
-def _truth(t_s: float, xy: np.ndarray, vxy: np.ndarray) -> PersonTruth:
+def _truth(t_s: float, xy: Sequence[float] | np.ndarray, vxy: Sequence[float] | np.ndarray) -> PersonTruth:
+    """The truth at t_s from the ground position xy (2,) and velocity vxy (2,), in read-only arrays (which
+    the truth takes without a copy)."""
     return PersonTruth(
         stamp_s=t_s,
-        position_m=np.array([xy[0], xy[1], PERSON_CENTRE_HEIGHT_M], dtype=float),
-        velocity_mps=np.array([vxy[0], vxy[1], 0.0], dtype=float),
+        position_m=read_only(np.array([xy[0], xy[1], PERSON_CENTRE_HEIGHT_M], dtype=float)),
+        velocity_mps=read_only(np.array([vxy[0], vxy[1], 0.0], dtype=float)),
     )
 
 
@@ -87,7 +92,10 @@ class PathPerson:
         seg = np.diff(self._path, axis=0)
         seg_len = np.hypot(seg[:, 0], seg[:, 1])
         self._s = np.concatenate([[0.0], np.cumsum(seg_len)])
-        self._dir = seg / seg_len[:, None]
+        # truth() works on plain-float copies: numpy's per-call cost on one segment was most of its work
+        self._s_list: list[float] = self._s.tolist()
+        self._path_xy: list[list[float]] = self._path.tolist()
+        self._dir_xy: list[list[float]] = (seg / seg_len[:, None]).tolist()
         self._speed = float(speed_mps)
         self._delay = float(start_delay_s)
 
@@ -103,11 +111,12 @@ class PathPerson:
     def truth(self, t_s: float) -> PersonTruth:
         walked = max(t_s - self._delay, 0.0) * self._speed
         if walked <= 0.0:
-            return _truth(t_s, self._path[0], np.zeros(2))
-        s = walked % self._s[-1]
-        i = min(int(np.searchsorted(self._s, s, side="right")) - 1, len(self._dir) - 1)
-        xy = self._path[i] + self._dir[i] * (s - self._s[i])
-        return _truth(t_s, xy, self._dir[i] * self._speed)
+            return _truth(t_s, self._path_xy[0], (0.0, 0.0))
+        s = float(walked % self._s[-1])  # numpy's remainder, as a float64 is the right operand
+        i = min(bisect.bisect_right(self._s_list, s) - 1, len(self._dir_xy) - 1)  # np.searchsorted, "right"
+        (px, py), (dx, dy) = self._path_xy[i], self._dir_xy[i]
+        along = s - self._s_list[i]
+        return _truth(t_s, (px + dx * along, py + dy * along), (dx * self._speed, dy * self._speed))
 
 
 @dataclass(frozen=True)
@@ -146,8 +155,10 @@ class RandomPerson:
         self._rng = rng
         self._p = params
         self._delay = float(start_delay_s)
-        self._xy = [np.zeros(2)]
-        self._v = [np.zeros(2)]
+        # The trajectory on its grid, (x, y) and (vx, vy) as plain floats: truth() interpolates it for every
+        # camera frame, and numpy's per-call cost on two numbers was most of the work.
+        self._xy: list[tuple[float, float]] = [(0.0, 0.0)]
+        self._v: list[tuple[float, float]] = [(0.0, 0.0)]
         self._heading = float(rng.uniform(-np.pi, np.pi))
         self._speed = 0.0
         self._target_speed = 0.0
@@ -174,24 +185,25 @@ class RandomPerson:
     def _step(self) -> None:
         p = self._p
         dt = p.step_s
-        xy = self._xy[-1]
+        x, y = self._xy[-1]
         if self._behaviour_left_s <= 0.0:
             self._next_behaviour()
         self._behaviour_left_s -= dt
-        r = float(np.hypot(xy[0], xy[1]))
+        r = float(np.hypot(x, y))
         if r > p.arena_radius_m - 2.0:
-            self._target_heading = math.atan2(-xy[1], -xy[0])
+            self._target_heading = math.atan2(-y, -x)
         err = wrap_angle(self._target_heading - self._heading)
         self._heading += float(np.clip(err, -p.turn_rate_radps * dt, p.turn_rate_radps * dt))
         dv = np.clip(self._target_speed - self._speed, -p.accel_mps2 * dt, p.accel_mps2 * dt)
         self._speed = float(self._speed + dv)
-        v = self._speed * np.array([math.cos(self._heading), math.sin(self._heading)])
-        new = xy + v * dt
-        rn = float(np.hypot(new[0], new[1]))
+        vx, vy = self._speed * math.cos(self._heading), self._speed * math.sin(self._heading)
+        x, y = x + vx * dt, y + vy * dt
+        rn = float(np.hypot(x, y))
         if rn > p.arena_radius_m:
-            new = new * (p.arena_radius_m / rn)
-        self._xy.append(new)
-        self._v.append(v)
+            scale = p.arena_radius_m / rn
+            x, y = x * scale, y * scale
+        self._xy.append((x, y))
+        self._v.append((vx, vy))
 
     def truth(self, t_s: float) -> PersonTruth:
         if not np.isfinite(t_s):
@@ -202,5 +214,6 @@ class RandomPerson:
         while len(self._xy) < i + 2:
             self._step()
         a = k - i
-        xy = (1.0 - a) * self._xy[i] + a * self._xy[i + 1]
-        return _truth(t_s, xy, self._v[i + 1] if walked_s > 0 else np.zeros(2))
+        (x0, y0), (x1, y1) = self._xy[i], self._xy[i + 1]
+        xy = ((1.0 - a) * x0 + a * x1, (1.0 - a) * y0 + a * y1)
+        return _truth(t_s, xy, self._v[i + 1] if walked_s > 0 else (0.0, 0.0))

@@ -21,7 +21,7 @@ import numpy as np
 from controller.measurement import NoiseParams, sample_detection
 from controller.messages import Detection, Obstacle
 from vehicles.autopilot import Autopilot
-from vehicles.camera import CameraParams, FrameView, camera_pose, view_person
+from vehicles.camera import CameraParams, FrameView, body_rotations, mounted_camera_pose, view_person
 from vehicles.world import Body, BodyPose, PersonModel, PersonTruth
 
 
@@ -72,6 +72,16 @@ class CameraFrame:
     stamp_s: float
     view: FrameView
     detected: bool
+
+
+@dataclass(frozen=True, eq=False)
+class _Shot:
+    """A frame an airborne camera takes: its vehicle, when, the body's pose and the person's truth then."""
+
+    vehicle_id: int
+    stamp_s: float
+    pose: BodyPose
+    truth: PersonTruth
 
 
 class SimWorld:
@@ -139,12 +149,19 @@ class SimWorld:
         return self._truth
 
     def advance(self, now_s: float) -> None:
+        """Step the bodies to now_s on the physics grid, taking each camera's frames when they are due.
+
+        The frames are developed (projected, detected) after the last step, in the order they were taken,
+        so that one call of scipy's makes all their rotations (`body_rotations`); what each frame sees was
+        fixed when it was taken, and each camera's detector draws from its own generator.
+        """
         if not math.isfinite(now_s):
             raise ValueError(f"time must be finite, got {now_s}")
         t0 = self._t
         if now_s <= t0:
             return
         n = max(1, math.ceil((now_s - t0) / self._step - 1e-9))
+        shots: list[_Shot] = []
         for k in range(1, n + 1):
             t = now_s if k == n else t0 + (now_s - t0) * k / n
             for body in self._bodies:
@@ -154,51 +171,59 @@ class SimWorld:
                 if self._next_frame[body.vehicle_id] <= t + 1e-9:
                     if self._truth.stamp_s != t:
                         self._truth = self._person.truth(t)
-                    self._capture(body, t)
+                    shot = self._shoot(body, t)
+                    if shot is not None:
+                        shots.append(shot)
+        self._develop(shots)
         if self._truth.stamp_s != now_s:
             self._truth = self._person.truth(now_s)
 
-    def _capture(self, body: Body, t: float) -> None:
+    def _shoot(self, body: Body, t: float) -> _Shot | None:
+        """The frame body's camera takes at t (due now), or None while the body is not in the air."""
         vid = body.vehicle_id
         while self._next_frame[vid] <= t + 1e-9:
             self._next_frame[vid] += self._period
         pose = body.pose()
         if pose is None or not pose.in_air:
+            return None
+        return _Shot(vehicle_id=vid, stamp_s=t, pose=pose, truth=self._truth)
+
+    def _develop(self, shots: list[_Shot]) -> None:
+        """What each frame shows, its detection if it sees the person, and its record, in order."""
+        if not shots:
             return
-        cam = camera_pose(
-            body_position_m=pose.position_m,
-            yaw_rad=pose.yaw_rad,
-            pitch_rad=pose.pitch_rad,
-            roll_rad=pose.roll_rad,
-            params=self._camera,
-        )
-        truth = self._truth
-        view = view_person(
-            pose=cam,
-            center_m=truth.position_m,
-            feet_m=truth.feet_m,
-            head_m=truth.head_m,
-            obstacles=self._obstacles,
-            params=self._camera,
-        )
-        if view.visible:
-            pos, cov = sample_detection(
-                self._rngs[vid],
-                camera_position_m=cam.position_m,
-                target_position_m=truth.position_m,
-                noise=self._detector.noise,
+        rotations = body_rotations([(s.pose.yaw_rad, s.pose.pitch_rad, s.pose.roll_rad) for s in shots])
+        for shot, r_wb in zip(shots, rotations, strict=True):
+            vid, t, pose, truth = shot.vehicle_id, shot.stamp_s, shot.pose, shot.truth
+            cam = mounted_camera_pose(
+                body_position_m=pose.position_m, body_to_world=r_wb, params=self._camera
             )
-            # Placed in the world with the MAV's believed pose, so its covariance includes the MAV's own
-            # self-localisation covariance (independent of the camera noise).
-            self._pending[vid].append(
-                Detection(
-                    source_id=vid,
-                    stamp_s=t,
-                    position_m=np.asarray(pos) + pose.believed_offset_m,
-                    cov_m2=cov + pose.position_cov_m2 if self._detector.add_pose_covariance else cov,
+            view = view_person(
+                pose=cam,
+                center_m=truth.position_m,
+                feet_m=truth.feet_m,
+                head_m=truth.head_m,
+                obstacles=self._obstacles,
+                params=self._camera,
+            )
+            if view.visible:
+                pos, cov = sample_detection(
+                    self._rngs[vid],
+                    camera_position_m=cam.position_m,
+                    target_position_m=truth.position_m,
+                    noise=self._detector.noise,
                 )
-            )
-        self._frames.append(CameraFrame(vehicle_id=vid, stamp_s=t, view=view, detected=view.visible))
+                # Placed in the world with the MAV's believed pose, so its covariance includes the MAV's own
+                # self-localisation covariance (independent of the camera noise).
+                self._pending[vid].append(
+                    Detection(
+                        source_id=vid,
+                        stamp_s=t,
+                        position_m=np.asarray(pos) + pose.believed_offset_m,
+                        cov_m2=cov + pose.position_cov_m2 if self._detector.add_pose_covariance else cov,
+                    )
+                )
+            self._frames.append(CameraFrame(vehicle_id=vid, stamp_s=t, view=view, detected=view.visible))
 
     def detections(self, vehicle_id: int) -> tuple[Detection, ...]:
         pending = self._pending.get(vehicle_id)
