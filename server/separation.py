@@ -28,12 +28,32 @@ class Separation:
     nearest_obstacle_m: float | None = None
 
 
-def _clearances_m(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> np.ndarray:
+@dataclass(frozen=True, eq=False)
+class Cylinders:
+    """Obstacles as the arrays the clearance maths reads: axis centres (M, 2), radii (M,) and tops (M,).
+    Built once for a flight's per-tick safety minima, so a tick does not rebuild them from the `Obstacle`
+    objects."""
+
+    centers_m: np.ndarray
+    radii_m: np.ndarray
+    tops_m: np.ndarray
+
+    @classmethod
+    def of(cls, obstacles: Sequence[Obstacle]) -> Cylinders:
+        return cls(
+            centers_m=np.array([o.center_m for o in obstacles]),
+            radii_m=np.array([o.radius_m for o in obstacles]),
+            tops_m=np.array([o.height_m for o in obstacles]),
+        )
+
+    def __len__(self) -> int:
+        return len(self.radii_m)
+
+
+def _clearances_m(points_m: np.ndarray, cylinders: Cylinders) -> np.ndarray:
     """(K, M) horizontal distance of each of points (K, 3) to each cylinder's surface (negative inside),
     inf where the point is not below the cylinder's top."""
-    centers = np.array([o.center_m for o in obstacles])
-    radii = np.array([o.radius_m for o in obstacles])
-    tops = np.array([o.height_m for o in obstacles])
+    centers, radii, tops = cylinders.centers_m, cylinders.radii_m, cylinders.tops_m
     d = np.hypot(points_m[:, None, 0] - centers[None, :, 0], points_m[:, None, 1] - centers[None, :, 1])
     return np.where(points_m[:, None, 2] < tops[None, :], d - radii[None, :], np.inf)
 
@@ -44,16 +64,16 @@ def obstacle_clearances_m(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -
     points_m = np.asarray(points_m, dtype=float).reshape(-1, 3)
     if not obstacles or len(points_m) == 0:
         return np.full(len(points_m), math.inf)
-    return np.min(_clearances_m(points_m, obstacles), axis=1)
+    return np.min(_clearances_m(points_m, Cylinders.of(obstacles)), axis=1)
 
 
-def closest_obstacle(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> tuple[float, int, int]:
-    """(clearance, point, obstacle) of the smallest clearance of points (K, 3) to the obstacles (as
+def closest_obstacle(points_m: np.ndarray, cylinders: Cylinders) -> tuple[float, int, int]:
+    """(clearance, point, cylinder) of the smallest clearance of points (K, 3) to the cylinders (as
     `obstacle_clearances_m`); (inf, -1, -1) if none counts."""
     points_m = np.asarray(points_m, dtype=float).reshape(-1, 3)
-    if not obstacles or len(points_m) == 0:
+    if not len(cylinders) or len(points_m) == 0:
         return math.inf, -1, -1
-    clearance = _clearances_m(points_m, obstacles)
+    clearance = _clearances_m(points_m, cylinders)
     i, j = np.unravel_index(int(np.argmin(clearance)), clearance.shape)
     if not math.isfinite(clearance[i, j]):
         return math.inf, -1, -1

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from controller.messages import Obstacle
-from server.separation import closest_obstacle
+from server.separation import Cylinders, closest_obstacle
 
 WARMUP_EPS_S = 1e-9  # a tick stamped this close below warmup_s counts as after it (float steps i / rate_hz)
 
@@ -98,6 +98,7 @@ class FlightSafety:
 
     def __init__(self, *, obstacles: Sequence[Obstacle] = (), vehicle_ids: Sequence[int] = ()) -> None:
         self._obstacles = tuple(obstacles)
+        self._cylinders = Cylinders.of(self._obstacles)
         self._ids = tuple(int(v) for v in vehicle_ids)
         self.separation = Closest()
         self.believed_separation = Closest()
@@ -121,7 +122,7 @@ class FlightSafety:
         d, i, j = closest_pair(believed[air])
         if i >= 0:
             self.believed_separation = self.believed_separation.lower(d, t, (ids[air[i]], ids[air[j]]))
-        d, i, j = closest_obstacle(pos, self._obstacles)
+        d, i, j = closest_obstacle(pos, self._cylinders)
         if i >= 0:
             pair = (ids[air[i]], self._obstacles[j].obstacle_id)
             self.obstacle_clearance = self.obstacle_clearance.lower(d, t, pair)
