@@ -74,10 +74,10 @@ def closest_obstacle(points_m: np.ndarray, cylinders: Cylinders) -> tuple[float,
     if not len(cylinders) or len(points_m) == 0:
         return math.inf, -1, -1
     clearance = _clearances_m(points_m, cylinders)
-    i, j = np.unravel_index(int(np.argmin(clearance)), clearance.shape)
+    i, j = divmod(int(clearance.argmin()), clearance.shape[1])
     if not math.isfinite(clearance[i, j]):
         return math.inf, -1, -1
-    return float(clearance[i, j]), int(i), int(j)
+    return float(clearance[i, j]), i, j
 
 
 def obstacle_clearance_m(points_m: np.ndarray, obstacles: Sequence[Obstacle]) -> float:

@@ -127,7 +127,7 @@ class FlightSafety:
             pair = (ids[air[i]], self._obstacles[j].obstacle_id)
             self.obstacle_clearance = self.obstacle_clearance.lower(d, t, pair)
         rho = np.hypot(pos[:, 0] - sample.person_m[0], pos[:, 1] - sample.person_m[1])
-        i = int(np.argmin(rho))
+        i = int(rho.argmin())
         self.person_distance = self.person_distance.lower(float(rho[i]), t, (ids[air[i]],))
 
     def metrics(self) -> dict[str, Any]:
@@ -253,7 +253,7 @@ def closest_pair(points_m: np.ndarray) -> tuple[float, int, int]:
     diff = points_m[:, None, :] - points_m[None, :, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
     rows, cols = _pairs(len(points_m))
-    best = int(np.argmin(dist[rows, cols]))
+    best = int(dist[rows, cols].argmin())
     return float(dist[rows[best], cols[best]]), int(rows[best]), int(cols[best])
 
 
