@@ -109,7 +109,7 @@ class FlightSafety:
     def add(self, sample: TickSample) -> None:
         """Take one tick's airborne MAVs into the minima."""
         self.ticks += 1
-        air = np.flatnonzero(sample.in_air)
+        air = sample.in_air.nonzero()[0]
         if air.size == 0:
             return
         ids = self._ids if len(self._ids) == len(sample.in_air) else tuple(range(1, len(sample.in_air) + 1))
@@ -253,8 +253,9 @@ def closest_pair(points_m: np.ndarray) -> tuple[float, int, int]:
     diff = points_m[:, None, :] - points_m[None, :, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
     rows, cols = _pairs(len(points_m))
-    best = int(dist[rows, cols].argmin())
-    return float(dist[rows[best], cols[best]]), int(rows[best]), int(cols[best])
+    pair_dist = dist[rows, cols]
+    best = int(pair_dist.argmin())
+    return float(pair_dist[best]), int(rows[best]), int(cols[best])
 
 
 @functools.cache
