@@ -13,7 +13,7 @@ they enter the dynamics as accelerations. Everything here is a pure function of 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -150,7 +150,16 @@ class TeammatePaths:
         shift = np.asarray(own_offset_m, dtype=float)[None, :] - offsets
         if not shift.any():
             return self
-        return replace(self, positions_m=self.positions_m + shift[:, None, :])
+        # the constructor, not dataclasses.replace: this runs every tick, and replace looks up every field
+        return TeammatePaths(
+            self.positions_m + shift[:, None, :],
+            self.vehicle_ids,
+            self.in_formation,
+            self.d_max_m,
+            self.rejected,
+            self.ages_s,
+            self.gps_offsets_m,
+        )
 
     @property
     def ages(self) -> np.ndarray:
