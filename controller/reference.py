@@ -147,11 +147,15 @@ def terminal_reference(
         if preferred_bearing_rad is None
         else float(preferred_bearing_rad)
     )
-    centre = person_position_m + (person_velocity_mps * horizon_s if params.predict_person else 0.0)
-    target = np.array(
-        [centre[0] + d_des_m * np.cos(bearing), centre[1] + d_des_m * np.sin(bearing), centre[2] + h_des_m]
-    )
-    return target, np.array([person_velocity_mps[0], person_velocity_mps[1], 0.0])
+    # On Python floats, numpy's own operations in its order (np.cos and np.sin kept): it runs every tick.
+    px, py, pz = np.asarray(person_position_m, dtype=float).tolist()
+    vx, vy, vz = np.asarray(person_velocity_mps, dtype=float).tolist()
+    if params.predict_person:
+        cx, cy, cz = px + vx * horizon_s, py + vy * horizon_s, pz + vz * horizon_s
+    else:
+        cx, cy, cz = px + 0.0, py + 0.0, pz + 0.0  # numpy's position + 0.0 (a -0.0 becomes 0.0)
+    target = np.array([cx + d_des_m * np.cos(bearing), cy + d_des_m * np.sin(bearing), cz + h_des_m])
+    return target, np.array([vx, vy, 0.0])
 
 
 def input_displacement(external_inputs_mps2: np.ndarray, *, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
