@@ -12,13 +12,14 @@ they enter the dynamics as accelerations. Everything here is a pure function of 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from controller.angles import wrap_angle
-from controller.messages import HorizonPlan, Obstacle
+from controller.messages import HorizonPlan, Obstacle, read_only
 
 HALF_PI = 0.5 * np.pi
 TWO_PI = 2.0 * np.pi
@@ -150,7 +151,16 @@ class TeammatePaths:
         shift = np.asarray(own_offset_m, dtype=float)[None, :] - offsets
         if not shift.any():
             return self
-        return replace(self, positions_m=self.positions_m + shift[:, None, :])
+        # the constructor, not dataclasses.replace: this runs every tick, and replace looks up every field
+        return TeammatePaths(
+            self.positions_m + shift[:, None, :],
+            self.vehicle_ids,
+            self.in_formation,
+            self.d_max_m,
+            self.rejected,
+            self.ages_s,
+            self.gps_offsets_m,
+        )
 
     @property
     def ages(self) -> np.ndarray:
@@ -312,6 +322,16 @@ def covariance_radius_m(cov_m2: np.ndarray) -> float | np.ndarray:
     return float(radius) if radius.ndim == 0 else radius
 
 
+@functools.lru_cache(maxsize=64)
+def _stacked_covariance_radii(covs: bytes) -> np.ndarray:
+    """(J,) `covariance_radius_m` of J stacked (3, 3) covariances given as their float64 bytes, read-only.
+    Remembered: `teammate_paths` stacks the same few covariances tick after tick (the agent's phantoms carry
+    the default one), and the closed form is a dozen numpy calls."""
+    radii = covariance_radius_m(np.frombuffer(covs).reshape(-1, 3, 3))
+    assert isinstance(radii, np.ndarray)  # one radius per covariance of the stack
+    return read_only(radii)
+
+
 def teammate_age_term_m(ages_s: np.ndarray, params: FieldParams) -> np.ndarray:
     """r_comm of eq. 15 for plans of these ages (s): teammate_speed_mps * max(0, age - grace), m."""
     return params.teammate_speed_mps * np.maximum(
@@ -365,7 +385,7 @@ def teammate_paths(
     else:
         paths = np.stack([plan_path(p, now_s=now_s, dt_s=dt_s, steps=steps) for p in plans])
     cap = params.covariance_radius_cap_m
-    radii = np.minimum(covariance_radius_m(covs), cap)
+    radii = np.minimum(_stacked_covariance_radii(covs.tobytes()), cap)
     d_max = (
         params.teammate_d_max_base_m
         + min(own_cov_radius_m, cap)

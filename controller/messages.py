@@ -15,6 +15,8 @@ from enum import Enum
 
 import numpy as np
 
+_FLOAT64 = np.dtype(np.float64)  # what frozen_array takes as it is
+
 
 def frozen_array(value, shape: tuple[int, ...], name: str) -> np.ndarray:
     """Return `value` as a read-only float64 array of `shape` (-1 = any length), or raise ValueError.
@@ -23,25 +25,26 @@ def frozen_array(value, shape: tuple[int, ...], name: str) -> np.ndarray:
     view of it): the controller hands over the arrays it has just computed this way (`read_only`), without a
     copy. Most fields of the messages built every tick are such arrays.
     """
-    taken = (
+    # cheapest tests first, and the dtype against a dtype (not the type, which numpy converts on every call)
+    if (
         type(value) is np.ndarray
-        and value.dtype == np.float64
-        and not value.flags.writeable
         and value.base is None
-    )
-    arr = value if taken else np.array(value, dtype=float)
-    if not _fits(arr.shape, shape):
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
-    if not taken:
-        arr.setflags(write=False)
+        and value.dtype == _FLOAT64
+        and not value.flags.writeable
+    ):
+        arr = value
+    else:
+        arr = np.array(value, dtype=float)
+        arr.setflags(write=False)  # a fresh copy: read-only before anyone sees it, even if it does not fit
+    got = arr.shape
+    if got != shape and not _fits(got, shape):
+        raise ValueError(f"{name} must have shape {shape}, got {got}")
     return arr
 
 
 def _fits(got: tuple[int, ...], shape: tuple[int, ...]) -> bool:
     """Whether an array of shape `got` has `shape` (-1 = any length). A plain loop: it runs for every field
-    of every message."""
-    if got == shape:
-        return True
+    of every message whose shape has a -1."""
     if len(got) != len(shape):
         return False
     for want, size in zip(shape, got, strict=True):

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controller.messages import read_only
+
 
 @dataclass(frozen=True)
 class ReferenceParams:
@@ -82,28 +84,36 @@ def initial_state(
 def plan_state_at(
     positions_m: np.ndarray, velocities_mps: np.ndarray, *, elapsed_s: float, dt_s: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(3,) position and velocity of a plan (N+2, 3) `elapsed_s` after its x(0), linearly interpolated and
-    held at the last state."""
+    """(3,) position and velocity of a plan (float64 (N+2, 3), a HorizonPlan's) `elapsed_s` after its x(0),
+    linearly interpolated and held at the last state; read-only, so a message takes them without a copy.
+
+    On Python floats (numpy's own IEEE operations, in its order): it runs twice per controller tick, and
+    numpy's per-call cost on two (3,) rows is most of its time.
+    """
     last = len(positions_m) - 1
     k = min(max(elapsed_s / dt_s, 0.0), float(last))
     lo = min(math.floor(k), last)
     hi = min(lo + 1, last)
     a = k - lo
-    return (
-        (1.0 - a) * positions_m[lo] + a * positions_m[hi],
-        (1.0 - a) * velocities_mps[lo] + a * velocities_mps[hi],
-    )
+    return _blend(positions_m, lo, hi, a), _blend(velocities_mps, lo, hi, a)
+
+
+def _blend(rows: np.ndarray, lo: int, hi: int, a: float) -> np.ndarray:
+    """(1 - a) rows[lo] + a rows[hi] as a read-only (3,) array, computed on Python floats."""
+    b = 1.0 - a
+    (x0, y0, z0), (x1, y1, z1) = rows[lo].tolist(), rows[hi].tolist()
+    return read_only(np.array([b * x0 + a * x1, b * y0 + a * y1, b * z0 + a * z1]))
 
 
 def plan_acceleration_at(velocities_mps: np.ndarray, *, elapsed_s: float, dt_s: float) -> np.ndarray:
     """(3,) acceleration of a plan (velocities (N+2, 3)) over the step that begins at or before `elapsed_s`
     after its x(0): the plan's u + f + g on that step, what the autopilot is told as feed-forward. Zero from
-    the last state on (the plan is held there)."""
+    the last state on (the plan is held there). Read-only, so a message takes it without a copy."""
     last = len(velocities_mps) - 1
     lo = math.floor(max(elapsed_s / dt_s, 0.0) + 1e-9)  # a whole step's time may land just below it
     if lo >= last:
-        return np.zeros(3)
-    return (np.asarray(velocities_mps[lo + 1], dtype=float) - velocities_mps[lo]) / dt_s
+        return read_only(np.zeros(3))
+    return read_only((np.asarray(velocities_mps[lo + 1], dtype=float) - velocities_mps[lo]) / dt_s)
 
 
 def bearing_rad(*, from_m: np.ndarray, to_m: np.ndarray) -> float:
@@ -137,11 +147,15 @@ def terminal_reference(
         if preferred_bearing_rad is None
         else float(preferred_bearing_rad)
     )
-    centre = person_position_m + (person_velocity_mps * horizon_s if params.predict_person else 0.0)
-    target = np.array(
-        [centre[0] + d_des_m * np.cos(bearing), centre[1] + d_des_m * np.sin(bearing), centre[2] + h_des_m]
-    )
-    return target, np.array([person_velocity_mps[0], person_velocity_mps[1], 0.0])
+    # On Python floats, numpy's own operations in its order (np.cos and np.sin kept): it runs every tick.
+    px, py, pz = np.asarray(person_position_m, dtype=float).tolist()
+    vx, vy, vz = np.asarray(person_velocity_mps, dtype=float).tolist()
+    if params.predict_person:
+        cx, cy, cz = px + vx * horizon_s, py + vy * horizon_s, pz + vz * horizon_s
+    else:
+        cx, cy, cz = px + 0.0, py + 0.0, pz + 0.0  # numpy's position + 0.0 (a -0.0 becomes 0.0)
+    target = np.array([cx + d_des_m * np.cos(bearing), cy + d_des_m * np.sin(bearing), cz + h_des_m])
+    return target, np.array([vx, vy, 0.0])
 
 
 def input_displacement(external_inputs_mps2: np.ndarray, *, dt_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -246,7 +246,7 @@ class TeammateTable:
         """The plans stamped at or after since_s, aligned to our horizon (now_s + n dt_s, n < steps), with
         their eq. 15 d_max (as fields.teammate_paths), then the extra plans (through teammate_paths)."""
         n = self._count
-        rows = np.flatnonzero(self._stamps[:n] >= since_s)
+        rows = (self._stamps[:n] >= since_s).nonzero()[0]  # np.flatnonzero without its Python wrapper
         out = np.empty((rows.shape[0], steps, 3))
         align_rows(
             self._positions,
