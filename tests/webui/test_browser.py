@@ -178,8 +178,10 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     radius = number_input(operator_page.operator, "radius (m)")
     radius.fill("1")
     radius.press("Enter")
-    point, fraction = clear_ground_point(live, camera)
-    answer = place_obstacle(operator_page, lambda: fraction)
+    point, _ = clear_ground_point(live, camera)
+    chosen = (np.round(camera.position, 2), np.round(camera.look_at, 2))
+    # where the point shows now, at every click: the view can move between choosing the point and clicking
+    answer = place_obstacle(operator_page, lambda: ground_to_canvas_fraction(camera, point))
     expect(answer).to_contain_text("Obstacle of radius 1.0 m added")  # a failure prints the answer shown
     live.wait_for(
         lambda: {o.obstacle_id for o in live.station.snapshot().obstacles} != before,
@@ -188,7 +190,9 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     )
     new = [o for o in httpx.get(f"{live.urls.api}api/obstacles").json() if o["obstacle_id"] not in before]
     assert len(new) == 1 and new[0]["kind"] == "virtual"
-    assert np.hypot(*(np.array(new[0]["center_m"]) - point[:2])) < 1.0
+    now = (np.round(camera.position, 2), np.round(camera.look_at, 2))
+    miss = np.hypot(*(np.array(new[0]["center_m"]) - point[:2]))
+    assert miss < 1.0, f"{miss:.2f} m from {point[:2]}; camera (position, look-at) then {chosen}, now {now}"
     live.wait_for(
         lambda: live.ui.server.scene.get_handle_by_name(f"/obstacle/{new[0]['obstacle_id']}") is not None,
         sim_s=5.0,
