@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import io
 import threading
+from dataclasses import dataclass
 
 import viser
 import viser.infra
@@ -28,13 +29,36 @@ TICKET_HEADER = "X-Skyring-Ticket"
 """The header on a forwarded viser connection that names the signed-in browser behind it."""
 
 
+@dataclass(frozen=True)
+class HemisphereLight:
+    """A sky-to-ground light (three.js HemisphereLight): colours as RGB 0-255, intensity as three.js's."""
+
+    name: str
+    sky_color: tuple[int, int, int]
+    ground_color: tuple[int, int, int]
+    intensity: float
+
+
+SKY_LIGHT = HemisphereLight(
+    "/lights/sky", sky_color=(255, 255, 255), ground_color=(150, 140, 120), intensity=2.5
+)
+"""What lights the scene, with viser's default lights, in place of its environment map: a white sky over
+warm ground, as bright as the map left the trees, MAVs and ellipsoid. Measured in chromium rendering WebGL in
+software (2 cores, 2026-12-06): once the page showed its controls, the map kept the page's thread busy for
+another 4.5-5.3 s (prefiltering it; no click is answered meanwhile), the light for at most 0.36 s; and each
+frame costs about 40 % less (0.27 against 0.47 of a core at the same frame rate)."""
+
+
 class OperatorUi:
     """Owns the viser server, the scene renderer and the control panel.
 
     host/port: where viser listens (port 0 picks a free port; a busy port makes viser take the next free
     one: read `port` for the real one). sigma: size of the covariance ellipsoid in standard deviations.
-    shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate). access:
-    who each client is (default: every client is an operator, for a station on loopback without sign-in).
+    shadows: cast shadows (off by default: without a GPU they halve the browser's frame rate).
+    environment_map: light the scene with viser's default HDRI environment map instead of `SKY_LIGHT` (off by
+    default: without a GPU the page prefilters the map for about 5 s after it shows, and every frame costs
+    about 40 % more; the hemisphere light gives the same colours). access: who each client is (default:
+    every client is an operator, for a station on loopback without sign-in).
     """
 
     def __init__(
@@ -46,6 +70,7 @@ class OperatorUi:
         port: int = 8080,
         sigma: float = 2.0,
         shadows: bool = False,
+        environment_map: bool = False,
         access: ClientAccess | None = None,
     ) -> None:
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own URL box; callers print ours
@@ -64,6 +89,14 @@ class OperatorUi:
         self.server.initial_camera.position = tuple(pose.position_m)
         self.server.initial_camera.look_at = tuple(pose.look_at_m)
         self.server.scene.configure_default_lights(cast_shadow=shadows)
+        if not environment_map:
+            self.server.scene.configure_environment_map(hdri=None)
+            self.server.scene.add_light_hemisphere(
+                SKY_LIGHT.name,
+                sky_color=SKY_LIGHT.sky_color,
+                ground_color=SKY_LIGHT.ground_color,
+                intensity=SKY_LIGHT.intensity,
+            )
         self._lock = threading.Lock()
         self.access = access or OpenAccess()
         # viser's own connect hook runs in its event loop before it sends a new client anything (the

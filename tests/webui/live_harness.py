@@ -193,8 +193,42 @@ def recent_console(pages: int = 4, lines: int = 40) -> str:
     return "\n".join(parts)
 
 
+FRAME_CAP_FPS = 10
+"""The pages' animation frames in these tests, per second at most (see `FRAME_CAP`)."""
+FRAME_CAP = f"""(() => {{
+  const gap = 1000 / {FRAME_CAP_FPS};
+  const raf = window.requestAnimationFrame.bind(window);
+  let queue = new Map(), next = 1, pending = false, last = -Infinity;
+  const run = (t) => {{
+    if (t - last < gap - 2) {{ setTimeout(() => raf(run), gap - (t - last)); return; }}
+    last = t;
+    pending = false;
+    const due = queue;
+    queue = new Map();
+    for (const callback of due.values()) {{
+      try {{ callback(t); }} catch (error) {{ setTimeout(() => {{ throw error; }}); }}
+    }}
+  }};
+  window.requestAnimationFrame = (callback) => {{
+    const id = next++;
+    queue.set(id, callback);
+    if (!pending) {{ pending = true; raf(run); }}
+    return id;
+  }};
+  window.cancelAnimationFrame = (id) => {{ queue.delete(id); }};
+}})();"""
+"""Every page's `requestAnimationFrame` (the page's own, not Playwright's) runs at most FRAME_CAP_FPS times a
+second, its callbacks batched into one frame as the browser batches them. Why: viser renders the 3-D view for
+a quarter of a second after every scene update, and the station updates it ten times a second, so the view
+renders without pause, as fast as the CPU allows. Chromium renders WebGL in software here, and one open page
+then kept 1.3 of the machine's two cores busy (measured: 36 ms of CPU per frame at SOFTWARE_GL_DPR 0.25, 56 ms
+at 0.5); at 10 frames a second it needs a quarter of that. The page shows the same scene and controls, a frame
+at most 0.1 s late; viser handles its queued messages once per frame, so none is lost."""
+
+
 def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
     context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    context.add_init_script(FRAME_CAP)
     context.set_default_timeout(ACTION_TIMEOUT_MS)
     page = context.new_page()
     opened = OpenPage(page=page, console_errors=[], requests=[])
@@ -207,7 +241,7 @@ def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
     return opened
 
 
-SOFTWARE_GL_DPR = 0.5  # see open_operator
+SOFTWARE_GL_DPR = 0.25  # see open_operator and FRAME_CAP
 
 
 def software_gl(url: str) -> str:
@@ -237,7 +271,7 @@ def open_page(browser: Browser, url: str, *, ui=None, viewport: tuple[int, int] 
     """Open the landing page `url` in a new context, recording console errors, page errors and every request
     URL; wait for the embedded operator page's canvas and controls. With the station's `ui`, also find the
     page's viser client (the one that connected last). The landing page hands its `fixedDpr` on to the
-    embedded view, which renders at half resolution (see `open_operator`)."""
+    embedded view, which renders at a quarter of the resolution (see `open_operator`)."""
     opened = _recording(browser, viewport)
     opened.page.goto(software_gl(url))
     return wait_for_operator_view(opened, ui=ui)
@@ -258,10 +292,11 @@ def sign_in(browser: Browser, url: str, user: tuple[str, str], *, ui=None) -> Op
 
 def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=None) -> OpenPage:
     """Open the operator page itself (viser's URL, as `skyring serve` prints it) full window at `viewport`,
-    recording console errors and requests; wait for its canvas and LAND ALL. The 3-D view renders at half
-    resolution (viser's `fixedDpr`; the panels are unaffected): chromium renders WebGL in software here, and
-    at full resolution on a busy two-core machine the renderer keeps the page's thread so busy that every
-    step of a test waits seconds for it."""
+    recording console errors and requests; wait for its canvas and LAND ALL. The 3-D view renders at
+    SOFTWARE_GL_DPR (viser's `fixedDpr`: a quarter of the resolution; the panels are unaffected) and at most
+    FRAME_CAP_FPS frames a second: chromium renders WebGL in software here, and at full resolution on a busy
+    two-core machine the renderer keeps the page's thread so busy that every step of a test waits seconds
+    for it. Per frame it costs 36 ms of CPU at 0.25, 56 ms at 0.5 and 120 ms at 1 (measured 2026-12-06)."""
     opened = _recording(browser, viewport)
     opened.embedded = False
     opened.page.goto(software_gl(url))

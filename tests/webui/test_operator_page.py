@@ -464,7 +464,8 @@ UPLOTS_JS = """
 
 
 def plotted(opened: OpenPage) -> list[dict]:
-    """The four charts as the page draws them, once each has a few samples (within 5 s of asking)."""
+    """The four charts as the page draws them, once each has a few samples and its x axis drawn (within 5 s of
+    asking: a chart takes new data at once and draws it, axes included, in the page's next frame)."""
     open_tab(opened.page, "Plots")
     try:
         expect(opened.page.get_by_text("Altitude per MAV")).to_be_visible()
@@ -472,7 +473,7 @@ def plotted(opened: OpenPage) -> list[dict]:
 
         def drawn() -> bool:
             charts[:] = opened.page.evaluate(UPLOTS_JS)
-            return len(charts) == 4 and all(len(c["x"]) > 2 for c in charts)
+            return len(charts) == 4 and all(len(c["x"]) > 2 and c["ticks"] for c in charts)
 
         assert first_seen(drawn, timeout_s=5.0) is not None, "the plots showed no data within 5 s"
         screenshot(opened.page, "plots")
