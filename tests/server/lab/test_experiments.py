@@ -186,6 +186,22 @@ def test_resume_does_not_reuse_a_failed_run(tmp_path):
 # ---- statistics --------------------------------------------------------------------------------------------
 
 
+def _loaded_kernel_signatures() -> int:
+    """In a pool's worker, before it has run anything: how many compiled forms the external inputs' kernel
+    holds (numba loads a kernel from its cache on its first call in a process, so 0 means not loaded)."""
+    from controller import fields_kernel
+
+    return len(fields_kernel._kernel.signatures)
+
+
+def test_a_runs_fresh_process_starts_with_the_compiled_kernels_loaded():
+    pool = exp._fresh_process_pool(jobs=1, simulator=exp.SIMULATION_MODULE)
+    try:
+        assert pool.submit(_loaded_kernel_signatures).result(timeout=120) >= 1
+    finally:
+        pool.shutdown()
+
+
 def test_describe_ignores_non_finite_values_and_gives_quartiles():
     s = rep.describe([4.0, 1.0, math.nan, 3.0, 2.0, math.inf])
     assert s is not None
