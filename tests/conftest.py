@@ -42,6 +42,12 @@ LONGEST = (
     "tests/webui/test_browser.py::live",  # 130-150 s: a live station and eleven browser tests
     "tests/server/lab/test_experiments.py::ordering",  # 95-110 s (2026-11-30): 21 runs of 45 s, 2 processes
     "tests/server/lab/test_sim_acceptance.py::paper_run",  # 13 flights of 120 s (K = 3, 5, 8, seeds 1-4)
+    # The PX4 tests wait on real-time peers with the CPU mostly idle (2026-12-06: scenarios 158 s of wall time
+    # for 57 s of CPU, link 73 s for 5 s, e2e 38 s for 8 s). Collected last, they ran last and ended the
+    # parallel pass alone for half a minute; started early, they overlap the CPU-bound runs.
+    "tests/vehicles/px4/test_px4_scenarios.py",
+    "tests/vehicles/px4/test_px4_link.py",
+    "tests/vehicles/px4/test_px4_e2e.py",
     "tests/webui/test_browser_security.py::secured_live",  # 110 s
     "tests/webui/test_operator_page.py::test_land_all_is_reachable",  # 45-55 s (3 MAVs; 16 run `alone`)
 )

@@ -221,9 +221,10 @@ FRAME_CAP = f"""(() => {{
 second, its callbacks batched into one frame as the browser batches them. Why: viser renders the 3-D view for
 a quarter of a second after every scene update, and the station updates it ten times a second, so the view
 renders without pause, as fast as the CPU allows. Chromium renders WebGL in software here, and one open page
-then kept 1.3 of the machine's two cores busy (measured: 36 ms of CPU per frame at SOFTWARE_GL_DPR 0.25, 56 ms
-at 0.5); at 10 frames a second it needs a quarter of that. The page shows the same scene and controls, a frame
-at most 0.1 s late; viser handles its queued messages once per frame, so none is lost."""
+then kept 1.3 of the machine's two cores busy (measured with viser's environment map: 36 ms of CPU per frame
+at SOFTWARE_GL_DPR 0.25, 56 ms at 0.5); at 10 frames a second it needs a quarter of that. The page shows the
+same scene and controls, a frame at most 0.1 s late; viser handles its queued messages once per frame, so none
+is lost."""
 
 
 def _recording(browser: Browser, viewport: tuple[int, int]) -> OpenPage:
@@ -296,7 +297,8 @@ def open_operator(browser: Browser, url: str, *, viewport: tuple[int, int], ui=N
     SOFTWARE_GL_DPR (viser's `fixedDpr`: a quarter of the resolution; the panels are unaffected) and at most
     FRAME_CAP_FPS frames a second: chromium renders WebGL in software here, and at full resolution on a busy
     two-core machine the renderer keeps the page's thread so busy that every step of a test waits seconds
-    for it. Per frame it costs 36 ms of CPU at 0.25, 56 ms at 0.5 and 120 ms at 1 (measured 2026-12-06)."""
+    for it. Per frame it cost 36 ms of CPU at 0.25, 56 ms at 0.5 and 120 ms at 1 (2026-12-06, with viser's
+    environment map, which the scene no longer uses: `webui.app.SKY_LIGHT`)."""
     opened = _recording(browser, viewport)
     opened.embedded = False
     opened.page.goto(software_gl(url))
