@@ -93,10 +93,10 @@ def test_changing_d_des_in_the_gui_moves_the_team_within_30_s(live, operator_pag
     assert took < 30.0
 
 
-def clear_ground_point(live, camera) -> tuple[np.ndarray, tuple[float, float]]:
+def clear_ground_point(live, camera) -> np.ndarray:
     """A ground point in the upper right part of the 3-D view (the Mission window covers the lower left,
     notifications the upper left), outside the ring the MAVs fly on about the person and clear of every
-    obstacle, with where it shows in the canvas."""
+    obstacle."""
     snap = live.station.snapshot()
     person = snap.person_truth.position_m[:2]
     ring = snap.formation.d_des_m + 3.0  # MAVs fly about d_des from the person, give or take a few metres
@@ -112,9 +112,9 @@ def clear_ground_point(live, camera) -> tuple[np.ndarray, tuple[float, float]]:
                 + [np.hypot(*(point[:2] - o.center_m)) - o.radius_m for o in snap.obstacles]
             )
             if best is None or clearance > best[0]:
-                best = (clearance, point, (fx, fy))
+                best = (clearance, point)
     assert best is not None and best[0] > 3.0, "no clear ground in view"
-    return best[1], best[2]
+    return best[1]
 
 
 PROMPT = "Click on the ground where the obstacle should stand."
@@ -178,8 +178,12 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     radius = number_input(operator_page.operator, "radius (m)")
     radius.fill("1")
     radius.press("Enter")
-    point, _ = clear_ground_point(live, camera)
-    chosen = (np.round(camera.position, 2), np.round(camera.look_at, 2))
+    point = clear_ground_point(live, camera)
+
+    def view() -> tuple[np.ndarray, np.ndarray]:
+        return np.round(camera.position, 2), np.round(camera.look_at, 2)
+
+    chosen = view()
     # where the point shows now, at every click: the view can move between choosing the point and clicking
     answer = place_obstacle(operator_page, lambda: ground_to_canvas_fraction(camera, point))
     expect(answer).to_contain_text("Obstacle of radius 1.0 m added")  # a failure prints the answer shown
@@ -190,7 +194,7 @@ def test_obstacle_added_with_the_button_and_a_ground_click_shows_in_scene_and_ap
     )
     new = [o for o in httpx.get(f"{live.urls.api}api/obstacles").json() if o["obstacle_id"] not in before]
     assert len(new) == 1 and new[0]["kind"] == "virtual"
-    now = (np.round(camera.position, 2), np.round(camera.look_at, 2))
+    now = view()
     miss = np.hypot(*(np.array(new[0]["center_m"]) - point[:2]))
     assert miss < 1.0, f"{miss:.2f} m from {point[:2]}; camera (position, look-at) then {chosen}, now {now}"
     live.wait_for(
