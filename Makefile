@@ -11,9 +11,9 @@ POSE_REQS := vehicles/detect/pose-requirements.txt
 POSE_PYTHON ?= $(shell for p in python3.12 python3.11; do command -v $$p >/dev/null 2>&1 && $$p -c 'import venv' 2>/dev/null && { echo $$p; break; }; done)
 FOOTAGE := /usr/share/doc/opencv-doc/examples/data/vtest.avi
 
-# Python keeps compiled modules, and pytest its assertion-rewritten test modules, in __pycache__ (ignored by
-# git). A machine that sets PYTHONDONTWRITEBYTECODE (this one does) makes every process compile them again:
-# each pytest process spent 5.5 s of its 11.5 s collection rewriting the test modules (docs/fast-core.md).
+# Python keeps compiled modules, and pytest its assertion-rewritten modules (tests and plugins), in __pycache__
+# (ignored by git). Where the machine sets PYTHONDONTWRITEBYTECODE (ours does), every process compiled them
+# again: each pytest process spent 5.5 s of its 11.5 s collection rewriting them (docs/fast-core.md).
 export PYTHONDONTWRITEBYTECODE :=
 
 .PHONY: run test test-px4 check bench lint chromium footage pose-env environments clean kernels

@@ -15,7 +15,6 @@ VTEST = Path("/usr/share/doc/opencv-doc/examples/data/vtest.avi")
 # many of the 30 processed frames show the person depends on the detector keeping up: the tests that read the
 # run are marked `alone`. Beside the parallel suite, CI's first frame took 14 s (the next processed frame was
 # number 139, not 8 as on an idle machine) and 12 of 30 frames had a detection.
-footage = pytest.mark.alone
 
 
 def _skyring(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
@@ -46,7 +45,7 @@ def run(tmp_path_factory):
     return proc, lines, out
 
 
-@footage
+@pytest.mark.alone
 def test_detections_of_real_footage_are_written_with_capture_stamps(run):
     proc, lines, _ = run
     assert proc.returncode == 0, proc.stderr
@@ -60,7 +59,7 @@ def test_detections_of_real_footage_are_written_with_capture_stamps(run):
         assert 0.0 <= d["head_conf"] <= 1.0 and 0.0 <= d["feet_conf"] <= 1.0
 
 
-@footage
+@pytest.mark.alone
 def test_reports_carry_the_camera_state_and_a_thumbnail(run):
     _, lines, _ = run
     reports = [x for x in lines if x["type"] == "report"]
@@ -69,7 +68,7 @@ def test_reports_carry_the_camera_state_and_a_thumbnail(run):
     assert any(r["thumbnail_jpeg_b64"] for r in reports)
 
 
-@footage
+@pytest.mark.alone
 def test_the_preview_writes_every_processed_frame_with_its_overlay(run):
     _, _, out = run
     frames = sorted((out / "preview").glob("frame-*.jpg"))
