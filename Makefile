@@ -62,8 +62,8 @@ WORKERS := $(shell echo $$(( $$(nproc) + 2 )))
 # Three passes, all always run: the suite without the browser on the workers; then the browser tests on two
 # workers, away from the suite's simulations and experiment pools (beside them a software-rendered page starved
 # for minutes on CI: two of its experiment fixtures run 2 processes each, on 3 workers and 2 cores); then the
-# tests marked `alone` one at a time with the machine to themselves (they bound wall-clock latency, which the
-# parallel passes' load would decide).
+# tests marked `alone` one at a time with the machine to themselves (they bound wall-clock time: latency, or a
+# detector keeping up with real-time footage, which the parallel passes' load would decide).
 PAGE_WORKERS := 2
 
 test: environments chromium footage kernels

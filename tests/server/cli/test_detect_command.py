@@ -11,11 +11,6 @@ import pytest
 
 VTEST = Path("/usr/share/doc/opencv-doc/examples/data/vtest.avi")
 
-# The footage plays at its own frame rate (a camera stand-in) and the detector takes the newest frame, so how
-# many of the 30 processed frames show the person depends on the detector keeping up: the tests that read the
-# run are marked `alone`. Beside the parallel suite, CI's first frame took 14 s (the next processed frame was
-# number 139, not 8 as on an idle machine) and 12 of 30 frames had a detection.
-
 
 def _skyring(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
@@ -25,6 +20,11 @@ def _skyring(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[st
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
+    """30 frames of vtest.avi through `skyring detect`. The footage plays at its own frame rate (a camera
+    stand-in) and the detector takes the newest frame, so how many frames show the person depends on the
+    detector keeping up: the tests that read this run are marked `alone`. Beside the parallel suite, CI's
+    first frame took 14 s (the next one processed was number 139, not 8 as on an idle machine) and 12 of 30
+    frames had a detection."""
     if not VTEST.is_file():
         pytest.fail(f"{VTEST} is missing: `make footage` installs Debian's opencv-doc", pytrace=False)
     out = tmp_path_factory.mktemp("detect")
