@@ -14,11 +14,14 @@ SUITES: dict[str, str] = {
     "links": "server.lab.bench_links:run",
     "agents": "server.lab.bench_agents:run",
     "detect": "server.lab.bench_detect:run",
+    "protocol": "server.lab.bench_protocol:run",
 }
 
 
 def bench(
-    suite: Annotated[str, typer.Argument(help="controller, sim, links, agents, detect, or all")] = "all",
+    suite: Annotated[
+        str, typer.Argument(help="controller, sim, links, agents, detect, protocol, or all")
+    ] = "all",
     repeats: Annotated[int, typer.Option(min=1, help="repetitions per measurement")] = 200,
 ) -> None:
     """Run a benchmark suite and print medians, p99 and ratios."""

@@ -67,15 +67,20 @@ def test_methods_family_starts_every_team_side_by_side():
     assert {dict(c.settings)["start"] for c in exp.paper_protocol("methods").conditions} == {"cluster"}
 
 
-def test_default_and_quick_profiles_run_at_the_mpcs_10_hz_step():
+def test_papers_protocol_runs_every_family_at_the_papers_100_hz():
     for family in exp.FAMILIES:
-        assert exp.paper_protocol(family).rate_hz == 10.0
+        specs = exp.plan_runs([exp.paper_protocol(family)], base_seed=0)
+        assert {s.config_fields()["rate_hz"] for s in specs} == {100.0}
+
+
+def test_quick_profile_runs_at_the_mpcs_10_hz_step():
+    for family in exp.FAMILIES:
         assert exp.quick_protocol(family).rate_hz == 10.0
 
 
-def test_rate_100_runs_the_papers_control_rate():
-    p = exp.with_overrides(exp.paper_protocol("methods"), exp.ProfileOverrides(rate_hz=exp.PAPER_RATE_HZ))
-    assert {s.config_fields()["rate_hz"] for s in exp.plan_runs([p], base_seed=0)} == {100.0}
+def test_rate_10_runs_the_papers_protocol_at_the_mpcs_step():
+    p = exp.with_overrides(exp.paper_protocol("methods"), exp.ProfileOverrides(rate_hz=10.0))
+    assert {s.config_fields()["rate_hz"] for s in exp.plan_runs([p], base_seed=0)} == {10.0}
 
 
 def test_rate_override_reaches_every_runs_simulator_config():
