@@ -63,7 +63,7 @@ class Condition:
 @dataclass(frozen=True)
 class Protocol:
     """How one family is run: its conditions, each run's duration (one entry per run index, seconds) and the
-    control rate of every run (Hz; the paper's is 100, the default protocol's DEFAULT_RATE_HZ)."""
+    control rate of every run (Hz; the paper's protocol runs at the paper's PAPER_RATE_HZ)."""
 
     family: str
     conditions: tuple[Condition, ...]
@@ -160,7 +160,6 @@ QUICK_DURATION_S = 30.0
 # 0.999). What the whole protocol costs at either rate: `skyring bench protocol` (docs/fast-core.md). The
 # quick profile, a smoke test of the pipeline, keeps the cheaper rate.
 PAPER_RATE_HZ = 100.0
-DEFAULT_RATE_HZ = PAPER_RATE_HZ
 QUICK_RATE_HZ = 10.0
 
 
@@ -229,15 +228,15 @@ def _obstacles_conditions(counts: Iterable[int]) -> tuple[Condition, ...]:
 def paper_protocol(family: str) -> Protocol:
     """The paper's protocol for `family`: SE1-SE4 with 5 MAVs, 30 runs (10 of 120 s, 20 of 180 s);
     3..16 MAVs with trees, 10 runs; 0..100 % link loss with 8 MAVs, 3 runs; 0..20 obstacles with 5 MAVs,
-    5 runs of 180 s. Control rate DEFAULT_RATE_HZ, the paper's 100 Hz."""
+    5 runs of 180 s. Control rate PAPER_RATE_HZ, the paper's 100 Hz."""
     if family == "methods":
-        return Protocol(family, _methods_conditions(), (120.0,) * 10 + (180.0,) * 20, DEFAULT_RATE_HZ)
+        return Protocol(family, _methods_conditions(), (120.0,) * 10 + (180.0,) * 20, PAPER_RATE_HZ)
     if family == "scalability":
-        return Protocol(family, _scalability_conditions(PAPER_VEHICLE_COUNTS), (120.0,) * 10, DEFAULT_RATE_HZ)
+        return Protocol(family, _scalability_conditions(PAPER_VEHICLE_COUNTS), (120.0,) * 10, PAPER_RATE_HZ)
     if family == "commloss":
-        return Protocol(family, _commloss_conditions(PAPER_LOSS_PERCENT), (120.0,) * 3, DEFAULT_RATE_HZ)
+        return Protocol(family, _commloss_conditions(PAPER_LOSS_PERCENT), (120.0,) * 3, PAPER_RATE_HZ)
     if family == "obstacles":
-        return Protocol(family, _obstacles_conditions(PAPER_OBSTACLE_COUNTS), (180.0,) * 5, DEFAULT_RATE_HZ)
+        return Protocol(family, _obstacles_conditions(PAPER_OBSTACLE_COUNTS), (180.0,) * 5, PAPER_RATE_HZ)
     raise ValueError(f"unknown experiment family {family!r}; choose from {', '.join(FAMILIES)}")
 
 
