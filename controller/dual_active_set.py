@@ -19,9 +19,13 @@ solve (their zeros skipped: a half-plane row of step n reaches only the inputs b
 row's value is a^T z, and its normal in y, W^T a, is computed only for a row that enters the active set. J
 is kept transposed and W's transpose beside it, so that rotations and products run along memory; every sum
 still adds its terms in the same order, so the answer is the same to the bit as with the plain layout. The
-closed form's resting variables start in the active set at 0 (`solve_identity_qp`'s start rows), so a solve
-where only a few rows bind takes a few iterations. Exit flags: 1 optimal, -1 infeasible (a violated row
-whose normal the active normals span, with no active row to give way), -2 iteration limit.
+row values (`sparse_rows.csr_times`), J^T n and W^T q are summed four rows side by side, each sum still in
+its own order, so that their additions overlap instead of waiting on one another; terms, columns and
+rotations that are exactly zero or the identity are skipped, which changes no sum that starts at +0.0 (at
+most the sign of a zero in J, which no sum or rotation can see). The closed form's resting variables start
+in the active set at 0 (`solve_identity_qp`'s start rows), so a solve where only a few rows bind takes a
+few iterations. Exit flags: 1 optimal, -1 infeasible (a violated row whose normal the active normals span,
+with no active row to give way), -2 iteration limit.
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ import math
 
 import numba
 import numpy as np
+
+from controller.sparse_rows import csr_times
 
 OPTIMAL, INFEASIBLE, ITERATION_LIMIT = 1, -1, -2
 
@@ -52,21 +58,40 @@ def _sparse(dense, ptr, idx, val):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _csr_values(ptr, idx, val, z, values, first):  # pragma: no cover - compiled
-    """values[first + r] = row r of a CSR matrix at z (n,)."""
-    for r in range(ptr.shape[0] - 1):
+def _transpose_times(j_t, normal, nonzero, nz, d):  # pragma: no cover - compiled
+    """d (n,) = J^T normal, over normal's nz nonzero entries (indices `nonzero`, ascending): each d[i] sums
+    its terms in that order (skipping a zero term never changes a sum that starts at +0.0), four rows of j_t
+    side by side so that the sums' additions overlap."""
+    nf = j_t.shape[0]
+    i = 0
+    while i + 4 <= nf:
+        r0, r1, r2, r3 = j_t[i], j_t[i + 1], j_t[i + 2], j_t[i + 3]
+        s0 = s1 = s2 = s3 = 0.0
+        for e in range(nz):
+            t = nonzero[e]
+            v = normal[t]
+            s0 += r0[t] * v
+            s1 += r1[t] * v
+            s2 += r2[t] * v
+            s3 += r3[t] * v
+        d[i], d[i + 1], d[i + 2], d[i + 3] = s0, s1, s2, s3
+        i += 4
+    while i < nf:
         s = 0.0
-        for k in range(ptr[r], ptr[r + 1]):
-            s += val[k] * z[idx[k]]
-        values[first + r] = s
+        row = j_t[i]
+        for e in range(nz):
+            t = nonzero[e]
+            s += row[t] * normal[t]
+        d[i] = s
+        i += 1
 
 
 @numba.njit(cache=True)
 def _row_values(a_ptr, a_idx, a_val, e_ptr, e_idx, e_val, z, values):  # pragma: no cover - compiled
     """values (m0 + m1,) = the fixed rows and the extra rows (both CSR) at z (n,). The extra rows' zeros
     are skipped: with z finite, a sum from +0.0 is never -0.0, so adding 0 * z[c] never changes it."""
-    _csr_values(a_ptr, a_idx, a_val, z, values, 0)
-    _csr_values(e_ptr, e_idx, e_val, z, values, a_ptr.shape[0] - 1)
+    csr_times(a_ptr, a_idx, a_val, z, values, 0)
+    csr_times(e_ptr, e_idx, e_val, z, values, a_ptr.shape[0] - 1)
 
 
 @numba.njit(cache=True)
@@ -96,8 +121,42 @@ def _upper_times(w_t, y, z):  # pragma: no cover - compiled
     z[:] = 0.0
     for col in range(w_t.shape[0]):
         w_col, y_col = w_t[col], y[col]
+        if y_col == 0.0:
+            continue
         for i in range(col + 1):
             z[i] += w_col[i] * y_col
+
+
+@numba.njit(cache=True)
+def _upper_transpose_times(w_t, q, c):  # pragma: no cover - compiled
+    """c (n,) = W^T q for W (n, n) upper triangular, given as w_t = W^T: c[i] sums w_t[i, row] q[row] over
+    row = 0..i in order, four rows side by side (their common columns first, then each one's last few)."""
+    nf = w_t.shape[0]
+    i = 0
+    while i + 4 <= nf:
+        r0, r1, r2, r3 = w_t[i], w_t[i + 1], w_t[i + 2], w_t[i + 3]
+        s0 = s1 = s2 = s3 = 0.0
+        for row in range(i + 1):
+            v = q[row]
+            s0 += r0[row] * v
+            s1 += r1[row] * v
+            s2 += r2[row] * v
+            s3 += r3[row] * v
+        for row in range(i + 1, i + 2):
+            s1 += r1[row] * q[row]
+        for row in range(i + 1, i + 3):
+            s2 += r2[row] * q[row]
+        for row in range(i + 1, i + 4):
+            s3 += r3[row] * q[row]
+        c[i], c[i + 1], c[i + 2], c[i + 3] = s0, s1, s2, s3
+        i += 4
+    while i < nf:
+        s = 0.0
+        row_i = w_t[i]
+        for row in range(i + 1):
+            s += row_i[row] * q[row]
+        c[i] = s
+        i += 1
 
 
 @numba.njit(cache=True)
@@ -169,13 +228,8 @@ def solve_identity_qp(
     m = lo.shape[0]
     w_t = np.ascontiguousarray(w.T)
     c = np.empty(nf)  # W^T q
-    y = np.empty(nf)
-    for i in range(nf):
-        s = 0.0
-        for row in range(i + 1):  # W is upper triangular
-            s += w[row, i] * q[row]
-        c[i] = s
-        y[i] = -s
+    _upper_transpose_times(w_t, q, c)
+    y = -c
     j_t = np.zeros((nf, nf))  # J^T: J's columns as rows, so rotations and J d run along memory
     r_mat = np.zeros((nf, nf))
     u = np.zeros(nf + 1)
@@ -183,6 +237,7 @@ def solve_identity_qp(
     in_set = np.zeros(2 * m, dtype=np.bool_)
     values = np.empty(m)
     normal = np.empty(nf)
+    nonzero = np.empty(nf, dtype=np.int64)
     d = np.empty(nf)
     step = np.empty(nf)
     r_dir = np.empty(nf)
@@ -235,14 +290,14 @@ def solve_identity_qp(
             norm2 += normal[i] * normal[i]
         u_new = 0.0
         added = False
+        nz = 0
+        for i in range(nf):
+            if normal[i] != 0.0:
+                nonzero[nz] = i
+                nz += 1
         while iterations < iteration_limit and not added:
             iterations += 1
-            for i in range(nf):  # d = J^T n
-                s = 0.0
-                j_row = j_t[i]
-                for t in range(nf):
-                    s += j_row[t] * normal[t]
-                d[i] = s
+            _transpose_times(j_t, normal, nonzero, nz, d)  # d = J^T n
             free2 = 0.0  # |d[k:]|^2 = n^T step
             for i in range(k, nf):
                 free2 += d[i] * d[i]
@@ -250,6 +305,8 @@ def solve_identity_qp(
             step[:] = 0.0
             for t in range(k, nf):
                 j_row, d_t = j_t[t], d[t]
+                if d_t == 0.0:
+                    continue
                 for i in range(nf):
                     step[i] += j_row[i] * d_t
             for i in range(k - 1, -1, -1):  # the dual direction R^-1 d[:k]
@@ -279,6 +336,8 @@ def solve_identity_qp(
             if t_primal <= t_dual:
                 for jj in range(nf - 1, k, -1):  # rotate d[k+1:] into d[k]
                     x, yy = d[jj - 1], d[jj]
+                    if yy == 0.0 and x >= 0.0:
+                        continue
                     h = math.hypot(x, yy)
                     if h == 0.0:
                         continue

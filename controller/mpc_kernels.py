@@ -81,18 +81,36 @@ def condensed_vectors(
         for a in range(3):
             lo[3 * n + a], hi[3 * n + a] = box_lo[n, a], box_hi[n, a]
     terminal = np.empty(6)
-    for r in range(ns):
-        s = 0.0
+    free = np.empty(6)
+    for step in range(m):
+        # The six state rows of a step are summed side by side, each in its own order (free_x0 x0, then
+        # input_to_state acc), so that their additions overlap: the same bits as one row after the other.
+        # input_to_state is block lower triangular in steps: the rows of step k only see inputs of steps < k+1
+        r = 6 * step
+        last = 3 * (step + 1)
+        s0 = s1 = s2 = s3 = s4 = s5 = 0.0
         for j in range(6):
-            s += free_x0[r, j] * x0[j]
-        # input_to_state is block lower triangular in steps: row of step k only sees inputs of steps < k+1
-        last = 3 * (r // 6 + 1)
+            x = x0[j]
+            s0 += free_x0[r, j] * x
+            s1 += free_x0[r + 1, j] * x
+            s2 += free_x0[r + 2, j] * x
+            s3 += free_x0[r + 3, j] * x
+            s4 += free_x0[r + 4, j] * x
+            s5 += free_x0[r + 5, j] * x
         for j in range(last):
-            s += input_to_state[r, j] * acc[j]
-        hi[nu + r] -= s
-        lo[nu + ns + r] -= s
-        if r >= ns - 6:
-            terminal[r - (ns - 6)] = s - reference[r - (ns - 6)]
+            x = acc[j]
+            s0 += input_to_state[r, j] * x
+            s1 += input_to_state[r + 1, j] * x
+            s2 += input_to_state[r + 2, j] * x
+            s3 += input_to_state[r + 3, j] * x
+            s4 += input_to_state[r + 4, j] * x
+            s5 += input_to_state[r + 5, j] * x
+        free[0], free[1], free[2], free[3], free[4], free[5] = s0, s1, s2, s3, s4, s5
+        for i in range(6):
+            hi[nu + r + i] -= free[i]
+            lo[nu + ns + r + i] -= free[i]
+            if step == m - 1:
+                terminal[i] = free[i] - reference[i]
     for i in range(nu):
         if effort == 0:
             offset = gravity[i % 3]

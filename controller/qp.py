@@ -44,6 +44,7 @@ import numba
 import numpy as np
 
 from controller.dual_active_set import OPTIMAL, solve_identity_qp
+from controller.sparse_rows import csr_times
 
 DAQP_INF = 1.0e30  # DAQP's own "no bound"
 
@@ -97,19 +98,12 @@ def closed_form_kernel(
     gradient = (P z + q)[resting]. Writes the three outputs; returns True when every row holds within tol and
     every resting gradient is >= -opt_tol. The sparsity is the per-axis split: no product with a zero."""
     g_ptr, g_idx, g_val = gain
-    for i in range(z.shape[0]):
-        s = 0.0
-        for k in range(g_ptr[i], g_ptr[i + 1]):
-            s += g_val[k] * q[g_idx[k]]
-        z[i] = s
+    csr_times(g_ptr, g_idx, g_val, q, z, 0)
     ok = True
     a_ptr, a_idx, a_val = a
+    csr_times(a_ptr, a_idx, a_val, z, rows, 0)
     for r in range(rows.shape[0]):
-        s = 0.0
-        for k in range(a_ptr[r], a_ptr[r + 1]):
-            s += a_val[k] * z[a_idx[k]]
-        rows[r] = s
-        if not (lo[r] - tol <= s <= hi[r] + tol):
+        if not (lo[r] - tol <= rows[r] <= hi[r] + tol):
             ok = False
     p_ptr, p_idx, p_val = p_rest
     for r in range(rest_idx.shape[0]):

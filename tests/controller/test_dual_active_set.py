@@ -8,8 +8,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_qp import cvxpy_qp_reference
+from test_sparse_rows import sequential_sum
 
-from controller.dual_active_set import INFEASIBLE, ITERATION_LIMIT, OPTIMAL, solve_identity_qp
+from controller.dual_active_set import (
+    INFEASIBLE,
+    ITERATION_LIMIT,
+    OPTIMAL,
+    _transpose_times,
+    _upper_transpose_times,
+    solve_identity_qp,
+)
 from controller.qp import _csr
 
 NO_START = np.zeros(0, dtype=np.int64)
@@ -121,3 +129,31 @@ def test_contradictory_rows_are_infeasible():
 def test_the_iteration_limit_is_reported_not_a_partial_answer():
     p, q, a, lo, hi = random_problem(np.random.default_rng(0))
     assert solve(p, q, a, lo, hi, limit=1)[0] == ITERATION_LIMIT
+
+
+def test_j_transpose_times_a_normal_skips_its_zeros_without_changing_a_bit():
+    """d = J^T n over n's nonzero entries only, four rows side by side, equals the plain in-order sums over
+    every entry to the bit, for a row count that is not a multiple of four and J with zeros of both signs."""
+    rng = np.random.default_rng(8)
+    size = 23
+    j_t = rng.normal(size=(size, size)) * (rng.random((size, size)) < 0.7)
+    j_t[rng.random((size, size)) < 0.1] = -0.0
+    normal = rng.normal(size=size) * (rng.random(size) < 0.5)
+    nonzero = np.flatnonzero(normal).astype(np.int64)
+    d = np.full(size, np.nan)
+    _transpose_times(j_t, normal, np.concatenate([nonzero, [0] * (size - nonzero.size)]), nonzero.size, d)
+    expected = [sequential_sum(j_t[i], normal) for i in range(size)]
+    assert [float(x).hex() for x in d] == [x.hex() for x in expected]
+
+
+def test_w_transpose_times_q_sums_each_column_of_w_in_order_to_the_bit():
+    """c = W^T q for W upper triangular (given transposed), four rows side by side, equals the plain
+    in-order sums over each column's entries w[0..i, i], for a size that is not a multiple of four."""
+    rng = np.random.default_rng(9)
+    size = 23
+    w = np.triu(rng.normal(size=(size, size)) * 10.0 ** rng.integers(-8, 9, (size, size)))
+    q = rng.normal(size=size)
+    c = np.full(size, np.nan)
+    _upper_transpose_times(np.ascontiguousarray(w.T), q, c)
+    expected = [sequential_sum(w[: i + 1, i], q[: i + 1]) for i in range(size)]
+    assert [float(x).hex() for x in c] == [x.hex() for x in expected]
