@@ -59,9 +59,9 @@ def _sparse(dense, ptr, idx, val):  # pragma: no cover - compiled
 
 @numba.njit(cache=True)
 def _transpose_times(j_t, normal, nonzero, nz, d):  # pragma: no cover - compiled
-    """d (n,) = J^T normal, over normal's nz nonzero entries (indices `nonzero`, ascending): each d[i] sums
-    its terms in that order (skipping a zero term never changes a sum that starts at +0.0), four rows of j_t
-    side by side so that the sums' additions overlap."""
+    """d (n,) = J^T normal for J given as j_t = J^T (J^T n, and W^T q), over normal's nz nonzero entries
+    (indices `nonzero`, ascending): each d[i] sums its terms in that order (skipping a zero term never changes
+    a sum that starts at +0.0), four rows of j_t side by side so that the sums' additions overlap."""
     nf = j_t.shape[0]
     i = 0
     while i + 4 <= nf:
@@ -125,38 +125,6 @@ def _upper_times(w_t, y, z):  # pragma: no cover - compiled
             continue
         for i in range(col + 1):
             z[i] += w_col[i] * y_col
-
-
-@numba.njit(cache=True)
-def _upper_transpose_times(w_t, q, c):  # pragma: no cover - compiled
-    """c (n,) = W^T q for W (n, n) upper triangular, given as w_t = W^T: c[i] sums w_t[i, row] q[row] over
-    row = 0..i in order, four rows side by side (their common columns first, then each one's last few)."""
-    nf = w_t.shape[0]
-    i = 0
-    while i + 4 <= nf:
-        r0, r1, r2, r3 = w_t[i], w_t[i + 1], w_t[i + 2], w_t[i + 3]
-        s0 = s1 = s2 = s3 = 0.0
-        for row in range(i + 1):
-            v = q[row]
-            s0 += r0[row] * v
-            s1 += r1[row] * v
-            s2 += r2[row] * v
-            s3 += r3[row] * v
-        for row in range(i + 1, i + 2):
-            s1 += r1[row] * q[row]
-        for row in range(i + 1, i + 3):
-            s2 += r2[row] * q[row]
-        for row in range(i + 1, i + 4):
-            s3 += r3[row] * q[row]
-        c[i], c[i + 1], c[i + 2], c[i + 3] = s0, s1, s2, s3
-        i += 4
-    while i < nf:
-        s = 0.0
-        row_i = w_t[i]
-        for row in range(i + 1):
-            s += row_i[row] * q[row]
-        c[i] = s
-        i += 1
 
 
 @numba.njit(cache=True)
@@ -227,8 +195,15 @@ def solve_identity_qp(
     nf = w.shape[0]
     m = lo.shape[0]
     w_t = np.ascontiguousarray(w.T)
-    c = np.empty(nf)  # W^T q
-    _upper_transpose_times(w_t, q, c)
+    normal = np.empty(nf)
+    nonzero = np.empty(nf, dtype=np.int64)
+    nz = 0
+    for i in range(nf):
+        if q[i] != 0.0:
+            nonzero[nz] = i
+            nz += 1
+    c = np.empty(nf)  # W^T q: w_t's entries right of its diagonal are zeros, which change no sum
+    _transpose_times(w_t, q, nonzero, nz, c)
     y = -c
     j_t = np.zeros((nf, nf))  # J^T: J's columns as rows, so rotations and J d run along memory
     r_mat = np.zeros((nf, nf))
@@ -236,8 +211,6 @@ def solve_identity_qp(
     act = np.zeros(nf + 1, dtype=np.int64)
     in_set = np.zeros(2 * m, dtype=np.bool_)
     values = np.empty(m)
-    normal = np.empty(nf)
-    nonzero = np.empty(nf, dtype=np.int64)
     d = np.empty(nf)
     step = np.empty(nf)
     r_dir = np.empty(nf)

@@ -15,7 +15,6 @@ from controller.dual_active_set import (
     ITERATION_LIMIT,
     OPTIMAL,
     _transpose_times,
-    _upper_transpose_times,
     solve_identity_qp,
 )
 from controller.qp import _csr
@@ -144,16 +143,3 @@ def test_j_transpose_times_a_normal_skips_its_zeros_without_changing_a_bit():
     _transpose_times(j_t, normal, np.concatenate([nonzero, [0] * (size - nonzero.size)]), nonzero.size, d)
     expected = [sequential_sum(j_t[i], normal) for i in range(size)]
     assert [float(x).hex() for x in d] == [x.hex() for x in expected]
-
-
-def test_w_transpose_times_q_sums_each_column_of_w_in_order_to_the_bit():
-    """c = W^T q for W upper triangular (given transposed), four rows side by side, equals the plain
-    in-order sums over each column's entries w[0..i, i], for a size that is not a multiple of four."""
-    rng = np.random.default_rng(9)
-    size = 23
-    w = np.triu(rng.normal(size=(size, size)) * 10.0 ** rng.integers(-8, 9, (size, size)))
-    q = rng.normal(size=size)
-    c = np.full(size, np.nan)
-    _upper_transpose_times(np.ascontiguousarray(w.T), q, c)
-    expected = [sequential_sum(w[: i + 1, i], q[: i + 1]) for i in range(size)]
-    assert [float(x).hex() for x in c] == [x.hex() for x in expected]
