@@ -248,9 +248,13 @@ class Agent:
         limit = now_s - self._ap.teammate_timeout_s
         return tuple(p for p in self._teammates.plans() if p.stamp_s >= limit)
 
-    def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
-        """Run one control tick at now_s: take in messages, then follow the latest plan, re-plan, or hold."""
-        detections = self._take_in(now_s, inputs)
+    def tick(
+        self, now_s: float, inputs: AgentInputs, *, own_detections: tuple[Detection, ...] | None = None
+    ) -> AgentOutputs:
+        """Run one control tick at now_s: take in messages (`take_in`), then follow the latest plan, re-plan,
+        or hold. own_detections: what `take_in(now_s, inputs)` returned when the caller ran it already (the
+        simulator lets the whole team take in before any of it plans); None takes in here."""
+        detections = self.take_in(now_s, inputs) if own_detections is None else own_detections
         own = inputs.own
         flying = inputs.role == AgentRole.FORMATION and own is not None
         last = self._followable(now_s) if flying else None
@@ -299,10 +303,10 @@ class Agent:
             self._counted, self._counters = values, AgentCounters(**self._counts)
         return self._counters
 
-    def _take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
-        """Keep teammates' plans, fuse their detections and this MAV's own (the camera's pixel detections
-        converted with the pose at their capture time); count what is rejected. Returns the own world-frame
-        detections of this tick.
+    def take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
+        """The first part of a tick: keep teammates' plans, fuse their detections and this MAV's own (the
+        camera's pixel detections converted with the pose at their capture time); count what is rejected.
+        Returns the own world-frame detections of this tick, which `tick` publishes.
 
         The tick's detections, teammates' and own, are fused in capture-time order: the tracker is exact for
         any order, but each one older than the last fused re-filters from its place on (16 MAVs: 15 000

@@ -284,6 +284,10 @@ class Mission:
         slots = roster_slots(
             [vid for vid, v in self._vehicles.items() if v.in_roster], offset_rad=self._params.slot_offset_rad
         )
+        # The whole team takes in its messages (fusing the detections) before any of it plans: each part of
+        # the tick then runs over the team back to back with its code and data warm (docs/fast-core.md), and
+        # no agent hears a message sent in this tick, whatever its place in the vehicle order.
+        ready = []
         for vid, v in self._vehicles.items():
             if v.silent:
                 self._world.detections(vid)  # stale frames and messages are dropped, not queued up
@@ -298,7 +302,9 @@ class Mission:
                 role=v.role(enabled=self._enabled),
                 roster=slots,
             )
-            out = v.tick(now_s, inputs)
+            ready.append((vid, v, inputs, v.take_in(now_s, inputs)))
+        for vid, v, inputs, own_detections in ready:
+            out = v.tick(now_s, inputs, own_detections=own_detections)
             for msg in out.outbox:
                 self._links.send(now_s, vid, msg)
 

@@ -33,7 +33,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from controller.messages import HorizonPlan, PersonEstimate, SolveStatus
+from controller.messages import Detection, HorizonPlan, PersonEstimate, SolveStatus
 from controller.params import ControllerParams, FormationParams
 from controller.tracker import TrackerStats
 from vehicles.agent import Agent, AgentCounters, AgentInputs, AgentOutputs, AgentRole
@@ -144,8 +144,9 @@ class AgentLink:
 
 
 class VehiclePilot:
-    """The phase machine of one vehicle and the agent that flies it. `observe` then `tick`, every control
-    period; operator actions (`land`, `hold`, `release`) take effect at once and show in the next readings.
+    """The phase machine of one vehicle and the agent that flies it. `observe` then `tick` (or `take_in` then
+    `tick`), every control period; operator actions (`land`, `hold`, `release`) take effect at once and show
+    in the next readings.
 
     clock: only used to time agent ticks (e.g. time.perf_counter); None leaves tick_s unset.
     """
@@ -166,6 +167,7 @@ class VehiclePilot:
         self.last: AgentOutputs | None = None
         self.last_setpoint: Setpoint | None = None
         self.tick_s: float | None = None
+        self._take_in_s = 0.0  # the last `take_in`'s time (s), added to the tick's
         self.paused = False
         self.state: AutopilotState | None = None
         self.resume = False  # airborne and not flown by skyring: the operator asked for it to join
@@ -366,12 +368,24 @@ class VehiclePilot:
             return AgentRole.AIRBORNE
         return AgentRole.GROUND
 
-    def tick(self, now_s: float, inputs: AgentInputs) -> AgentOutputs:
-        """Run the agent and send its set-point to the autopilot when it flies the formation."""
+    def take_in(self, now_s: float, inputs: AgentInputs) -> tuple[Detection, ...]:
+        """The agent's take-in ahead of `tick` (`Agent.take_in`), which then gets its answer; its time counts
+        in that tick's tick_s."""
         t0 = self._clock() if self._clock is not None else None
-        out = self.agent.tick(now_s, inputs)
+        own = self.agent.take_in(now_s, inputs)
         if t0 is not None and self._clock is not None:
-            self.tick_s = self._clock() - t0
+            self._take_in_s = self._clock() - t0
+        return own
+
+    def tick(
+        self, now_s: float, inputs: AgentInputs, *, own_detections: tuple[Detection, ...] | None = None
+    ) -> AgentOutputs:
+        """Run the agent and send its set-point to the autopilot when it flies the formation.
+        own_detections: `take_in`'s answer when it ran for this tick (None: the agent takes in here)."""
+        t0 = self._clock() if self._clock is not None else None
+        out = self.agent.tick(now_s, inputs, own_detections=own_detections)
+        if t0 is not None and self._clock is not None:
+            self.tick_s = self._clock() - t0 + (self._take_in_s if own_detections is not None else 0.0)
         self.last = out
         if out.setpoint is not None and inputs.role == AgentRole.FORMATION:
             self.autopilot.send_setpoint(out.setpoint)

@@ -251,3 +251,14 @@ def test_takeoff_height_follows_h_des_and_stays_inside_the_arena():
         ).mission.takeoff_height_m()
         == 5.0
     )
+
+
+def test_no_agent_hears_a_plan_sent_in_the_same_tick_whatever_its_place_in_the_vehicle_order():
+    """With instant links, every teammate's newest plan is the previous tick's, for the first vehicle as for
+    the last: the whole team takes in before any of it sends (Mission.step)."""
+    setup = _setup(latency_s=0.0, jitter_s=0.0)
+    t = _in_formation(setup)
+    previous = round(t - 1.0 / RATE_HZ, 6)
+    pilots = setup.mission._vehicles.values()  # noqa: SLF001 - what each agent heard is inside it
+    newest = {v.vehicle_id: sorted(round(p.stamp_s, 6) for p in v.agent.teammate_plans(t)) for v in pilots}
+    assert newest == {vid: [previous, previous] for vid in newest}

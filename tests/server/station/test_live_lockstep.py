@@ -47,11 +47,11 @@ def flying(monkeypatch, setup: SimSetup, *, slow_s) -> tuple[GroundStation, Reco
     rec = Recorder()
     tick = Agent.tick
 
-    def slow_tick(agent: Agent, now_s, inputs):
+    def slow_tick(agent: Agent, now_s, inputs, **kwargs):
         if agent.vehicle_id == 1:
             time.sleep(slow_s(len(rec.ticks)))
             rec.ticks.append((agent.vehicle_id, now_s, time.monotonic()))
-        return tick(agent, now_s, inputs)
+        return tick(agent, now_s, inputs, **kwargs)
 
     monkeypatch.setattr(Agent, "tick", slow_tick)
     for autopilot in setup.autopilots:
