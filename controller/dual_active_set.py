@@ -202,7 +202,7 @@ def solve_identity_qp(
         if q[i] != 0.0:
             nonzero[nz] = i
             nz += 1
-    c = np.empty(nf)  # W^T q: w_t's entries right of its diagonal are zeros, which change no sum
+    c = np.empty(nf)  # W^T q: the zeros right of w_t's diagonal change no sum (q is finite)
     _transpose_times(w_t, q, nonzero, nz, c)
     y = -c
     j_t = np.zeros((nf, nf))  # J^T: J's columns as rows, so rotations and J d run along memory
