@@ -42,6 +42,21 @@ def input_box(
 
 
 @numba.njit(cache=True)
+def _six_rows_times(matrix, r, vector, count, s0, s1, s2, s3, s4, s5):  # pragma: no cover - compiled
+    """The sums s0..s5 of rows r..r+5 of matrix, each continued over its first `count` entries times vector,
+    in order; the six sums side by side so that their additions overlap."""
+    for j in range(count):
+        x = vector[j]
+        s0 += matrix[r, j] * x
+        s1 += matrix[r + 1, j] * x
+        s2 += matrix[r + 2, j] * x
+        s3 += matrix[r + 3, j] * x
+        s4 += matrix[r + 4, j] * x
+        s5 += matrix[r + 5, j] * x
+    return s0, s1, s2, s3, s4, s5
+
+
+@numba.njit(cache=True)
 def condensed_vectors(
     free_x0: np.ndarray,
     input_to_state: np.ndarray,
@@ -88,24 +103,10 @@ def condensed_vectors(
         # input_to_state is block lower triangular in steps: the rows of step k only see inputs of steps < k+1
         r = 6 * step
         last = 3 * (step + 1)
-        s0 = s1 = s2 = s3 = s4 = s5 = 0.0
-        for j in range(6):
-            x = x0[j]
-            s0 += free_x0[r, j] * x
-            s1 += free_x0[r + 1, j] * x
-            s2 += free_x0[r + 2, j] * x
-            s3 += free_x0[r + 3, j] * x
-            s4 += free_x0[r + 4, j] * x
-            s5 += free_x0[r + 5, j] * x
-        for j in range(last):
-            x = acc[j]
-            s0 += input_to_state[r, j] * x
-            s1 += input_to_state[r + 1, j] * x
-            s2 += input_to_state[r + 2, j] * x
-            s3 += input_to_state[r + 3, j] * x
-            s4 += input_to_state[r + 4, j] * x
-            s5 += input_to_state[r + 5, j] * x
-        free[0], free[1], free[2], free[3], free[4], free[5] = s0, s1, s2, s3, s4, s5
+        sums = _six_rows_times(free_x0, r, x0, 6, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        free[0], free[1], free[2], free[3], free[4], free[5] = _six_rows_times(
+            input_to_state, r, acc, last, *sums
+        )
         for i in range(6):
             hi[nu + r + i] -= free[i]
             lo[nu + ns + r + i] -= free[i]
