@@ -58,6 +58,17 @@ def _sparse(dense, ptr, idx, val):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
+def _nonzero_indices(vector, out):  # pragma: no cover - compiled
+    """Write the indices of vector's nonzero entries (n,), ascending, into out (n,); return how many."""
+    count = 0
+    for i in range(vector.shape[0]):
+        if vector[i] != 0.0:
+            out[count] = i
+            count += 1
+    return count
+
+
+@numba.njit(cache=True)
 def _transpose_times(j_t, normal, nonzero, nz, d):  # pragma: no cover - compiled
     """d (n,) = J^T normal for J given as j_t = J^T (J^T n, and W^T q), over normal's nz nonzero entries
     (indices `nonzero`, ascending): each d[i] sums its terms in that order (skipping a zero term never changes
@@ -197,11 +208,7 @@ def solve_identity_qp(
     w_t = np.ascontiguousarray(w.T)
     normal = np.empty(nf)
     nonzero = np.empty(nf, dtype=np.int64)
-    nz = 0
-    for i in range(nf):
-        if q[i] != 0.0:
-            nonzero[nz] = i
-            nz += 1
+    nz = _nonzero_indices(q, nonzero)
     c = np.empty(nf)  # W^T q: the zeros right of w_t's diagonal change no sum (q is finite)
     _transpose_times(w_t, q, nonzero, nz, c)
     y = -c
@@ -263,11 +270,7 @@ def solve_identity_qp(
             norm2 += normal[i] * normal[i]
         u_new = 0.0
         added = False
-        nz = 0
-        for i in range(nf):
-            if normal[i] != 0.0:
-                nonzero[nz] = i
-                nz += 1
+        nz = _nonzero_indices(normal, nonzero)
         while iterations < iteration_limit and not added:
             iterations += 1
             _transpose_times(j_t, normal, nonzero, nz, d)  # d = J^T n

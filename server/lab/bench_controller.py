@@ -28,6 +28,7 @@ from controller.params import ControllerParams, FormationParams
 from controller.reference import plan_state_at
 from controller.teammates import TeammateTable, TeammateView
 from controller.tracker import PersonTracker
+from vehicles.agent import AgentParams
 from vehicles.sim.person import PathPerson, paper_path
 from vehicles.sim.trees import paper_trees
 
@@ -39,6 +40,7 @@ RATE_HZ = 100.0
 PLAN_PERIOD_TICKS = 10  # plans are published at 10 Hz
 DETECTOR_HZ = 4.0
 WARMUP_S = 20.0
+TEAMMATE_WINDOW_S = AgentParams().teammate_timeout_s  # older plans are left out, as the agent forgets them
 
 
 def _start(team_size: int) -> np.ndarray:
@@ -122,7 +124,7 @@ def _fly(
             for k in range(team_size)
         ]
         for k, (ctrl, own) in enumerate(zip(ctrls, states, strict=True)):
-            mates = tables[k].view(now - 3.0)
+            mates = tables[k].view(now - TEAMMATE_WINDOW_S)
             if k == 0:
                 out, row = _timed_tick(tracker, ctrl, now, own, detections, mates, trees, formation)
                 if record and tick >= warm:
@@ -197,7 +199,7 @@ def _replay_alone(log: list[_TickInputs], *, active_set: str) -> tuple[np.ndarra
     times: list[tuple] = []
     same = True
     for tick, given in enumerate(log):
-        mates = table.view(given.now_s - 3.0)
+        mates = table.view(given.now_s - TEAMMATE_WINDOW_S)
         out, row = _timed_tick(
             tracker, ctrl, given.now_s, given.own, given.detections, mates, trees, formation
         )

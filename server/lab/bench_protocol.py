@@ -74,7 +74,7 @@ def run(*, repeats: int) -> None:
     print(
         f"  {'rate':>8} "
         + " ".join(f"{f:>12}" for f in exp.FAMILIES)
-        + f" {'CPU min':>9} {'on 2 cores':>11}  target"
+        + f" {'CPU min':>9} {f'on {CORES} cores':>11}  target"
     )
     for rate_hz in RATES_HZ:
         family_s = []
