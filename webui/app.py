@@ -21,6 +21,7 @@ import viser.infra
 
 from webui.access import ClientAccess, OpenAccess
 from webui.camera import FOV_RAD, CameraDirector, formation_frame, orbit_pose
+from webui.early_input import EarlyInput
 from webui.panels import CONTROL_PANEL_WIDTH_PX, OperatorPanel
 from webui.scene import SceneRenderer
 from webui.view import OperatorActions, SceneView
@@ -110,6 +111,8 @@ class OperatorUi:
         self.panel = OperatorPanel(
             self.server, actions, initial, camera=self.camera, sigma=sigma, access=self.access
         )
+        # what a page sends before its first camera report (viser would drop it) runs once viser knows it
+        self.early_input = EarlyInput(self.server)
         self.server.on_client_connect(self._on_connect)
         self.server.on_client_disconnect(lambda client: self.camera.forget(client.client_id))
         self.publish(initial)
