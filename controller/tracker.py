@@ -1,7 +1,8 @@
 """The cooperative person tracker (paper Sec. III-B): one MAV's Kalman-filter replica of the person's state.
 
 Every MAV fuses its own and its teammates' world-frame detections, each with its own covariance
-(measurement.py), in a linear Kalman filter (filterpy) on x = [p (3), v (3)] (ENU, m and m/s).
+(measurement.py), in a linear Kalman filter on x = [p (3), v (3)] (ENU, m and m/s): filterpy's, the filter of
+record, unless `TrackerParams.kalman_filter` selects its compiled twin (kalman.py).
 
 Motion model (docs/method.md#person-tracker, from the authors' code): the velocity decays exponentially, to
 `velocity_decay_fraction` of itself over `velocity_decay_time_s` (time constant tau = T / ln(1 / fraction),
@@ -41,7 +42,10 @@ import numba
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from controller.kalman import CompiledKalman
 from controller.messages import Detection, PersonEstimate, read_only
+
+KALMAN_FILTERS = ("filterpy", "compiled")
 
 
 @dataclass(frozen=True)
@@ -57,7 +61,9 @@ class TrackerParams:
     initial_cov_diag: (6,) diagonal of a new track's covariance about its first detection (m^2, m^2/s^2);
     cache_size: how many accepted detections are kept for re-filtering out-of-order ones;
     max_future_s: when update() is told the current time, a detection stamped more than this after it is
-    INVALID (a clock error that would otherwise start a track no later detection could follow).
+    INVALID (a clock error that would otherwise start a track no later detection could follow);
+    kalman_filter: what moves the track: "filterpy" (the filter of record) or "compiled" (kalman.py: the
+    same equations in one compiled call each; round-off differs, so seeded reports do too).
     """
 
     gate_sigma: float = 6.0
@@ -68,6 +74,7 @@ class TrackerParams:
     initial_cov_diag: tuple[float, float, float, float, float, float] = (100.0, 100.0, 10.0, 1.0, 1.0, 0.5)
     cache_size: int = 20
     max_future_s: float = 0.5
+    kalman_filter: str = "filterpy"
 
     def __post_init__(self) -> None:
         if not (self.gate_sigma > 0 and self.reset_after_s > 0 and self.velocity_decay_time_s > 0):
@@ -84,6 +91,8 @@ class TrackerParams:
             raise ValueError(f"cache_size must be >= 2, got {self.cache_size}")
         if not self.max_future_s >= 0:
             raise ValueError(f"max_future_s must be >= 0, got {self.max_future_s}")
+        if self.kalman_filter not in KALMAN_FILTERS:
+            raise ValueError(f"kalman_filter must be one of {KALMAN_FILTERS}, got {self.kalman_filter!r}")
 
     @property
     def velocity_time_constant_s(self) -> float:
@@ -151,7 +160,7 @@ def _transition(dt_s: float, tau_s: float, psd: np.ndarray) -> tuple[np.ndarray,
 def _predicted(dt_s, tau_s, psd, x, p, position_out, velocity_out, p_out):  # pragma: no cover - compiled
     """(position_out (3,), velocity_out (3,)) = F x, p_out (6, 6) = sym(F P F^T + Q) for F, Q of `_transition`
     over dt_s: what `estimate` hands out every tick, in one compiled call, in the arrays the estimate keeps.
-    Only filterpy ever moves the filter itself."""
+    Only the filter's own predict and update ever move it."""
     b = math.exp(-dt_s / tau_s)
     f_pv, q_pp, q_pv, q_vv = _coefficients(b, dt_s, tau_s)
     fp = np.empty((6, 6))  # F P
@@ -208,6 +217,16 @@ class _Entry:
     P_before: np.ndarray | None = None
 
 
+def _kalman_filter(kind: str) -> KalmanFilter | CompiledKalman:
+    """The filter that moves the track, x = [p, v] measured through H = [I 0]: filterpy's, or its compiled
+    twin (`TrackerParams.kalman_filter`)."""
+    if kind == "compiled":
+        return CompiledKalman()
+    kf = KalmanFilter(dim_x=6, dim_z=3)
+    kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
+    return kf
+
+
 def _entry_key(entry: _Entry) -> tuple[float, int]:
     return entry.key
 
@@ -225,8 +244,7 @@ class PersonTracker:
         self._psd = psd
         self._psd_key = tuple(psd.tolist())  # the same values, hashable (`_shared_transition`)
         self._P0 = np.diag(np.asarray(self.params.initial_cov_diag, dtype=float))
-        self._kf = KalmanFilter(dim_x=6, dim_z=3)
-        self._kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
+        self._kf = _kalman_filter(self.params.kalman_filter)
         self._t: float | None = None  # time of the filter's state; None before the first detection
         self._cache: list[_Entry] = []
         self._counts = dict.fromkeys(("accepted", "gated", "stale", "invalid", "resets", "out_of_order"), 0)
