@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scene_views import flying_mav, scene_view
 
-from controller.params import FormationParams
 from webui.cards import (
     STATUS_CRITICAL,
     STATUS_GROUND,
@@ -23,29 +23,22 @@ from webui.cards import (
     vehicle_status,
 )
 from webui.geometry import vehicle_color
-from webui.view import Alert, PaceView, Range, SceneView, Severity, VehicleView
+from webui.view import Alert, PaceView, SceneView, Severity, VehicleView
 
 
 def mav(vehicle_id: int, **changes) -> VehicleView:
-    base = VehicleView(
-        vehicle_id=vehicle_id,
-        phase="formation",
-        mode="offboard",
-        armed=True,
-        in_air=True,
-        in_formation=True,
-        position_m=np.array([1.0, 2.0, 9.25]),
-        velocity_mps=np.array([0.3, 0.4, 0.0]),
-        yaw_rad=0.0,
-        link_age_s=0.04,
-        link_stale=False,
-        solve_status="solved",
-        solver_time_s=1.5e-4,
-        battery_fraction=0.87,
-        distance_to_person_m=8.04,
-        plan_age_s=0.0,
-    )
-    return dataclasses.replace(base, **changes)
+    """A MAV in formation flight with what the cards show of it: speed, solver, battery, distance."""
+    shown = {
+        "position_m": np.array([1.0, 2.0, 9.25]),
+        "velocity_mps": np.array([0.3, 0.4, 0.0]),
+        "link_age_s": 0.04,
+        "solve_status": "solved",
+        "solver_time_s": 1.5e-4,
+        "battery_fraction": 0.87,
+        "distance_to_person_m": 8.04,
+        "plan_age_s": 0.0,
+    }
+    return flying_mav(vehicle_id, **(shown | changes))
 
 
 def alert(alert_id: str, vehicle_id: int | None, severity: Severity, **changes) -> Alert:
@@ -66,20 +59,8 @@ def alert(alert_id: str, vehicle_id: int | None, severity: Severity, **changes) 
 
 
 def scene(vehicles, alerts=(), **changes) -> SceneView:
-    base = SceneView(
-        time_s=123.45,
-        vehicles=tuple(vehicles),
-        obstacles=(),
-        formation=FormationParams(),
-        formation_enabled=True,
-        arena_min_m=np.array([-20.0, -20.0, 3.0]),
-        arena_max_m=np.array([20.0, 20.0, 10.0]),
-        d_des_range_m=Range(3.0, 18.5),
-        h_des_range_m=Range(2.1, 9.1),
-        alerts=tuple(alerts),
-        utc_s=1_700_000_000.0,
-    )
-    return dataclasses.replace(base, **changes)
+    fields = {"time_s": 123.45, "alerts": tuple(alerts), "utc_s": 1_700_000_000.0}
+    return scene_view(vehicles, **(fields | changes))
 
 
 def test_header_shows_mission_time_utc_the_recording_with_its_path_and_the_real_time_factor():

@@ -12,18 +12,17 @@ import time
 from collections.abc import Callable, Iterator
 
 import msgspec.msgpack
-import numpy as np
 import pytest
 import viser
 import zstandard
+from scene_views import flying_mav, scene_view
 from viser import _messages
 from websockets.sync.client import connect
 from websockets.sync.connection import Connection
 from websockets.typing import Subprotocol
 
-from controller.params import FormationParams
 from webui.app import OperatorUi
-from webui.view import OperatorActions, Range, SceneView, VehicleView
+from webui.view import OperatorActions
 
 ANSWER_S = 10.0  # the page's answer comes within milliseconds; this bounds a loaded machine
 
@@ -44,36 +43,10 @@ class Actions(OperatorActions):
         return 0
 
 
-def view() -> SceneView:
-    mav = VehicleView(
-        vehicle_id=1,
-        phase="formation",
-        mode="offboard",
-        armed=True,
-        in_air=True,
-        in_formation=True,
-        position_m=np.array([1.0, 2.0, 9.0]),
-        yaw_rad=0.0,
-        link_age_s=0.0,
-        link_stale=False,
-    )
-    return SceneView(
-        time_s=1.0,
-        vehicles=(mav,),
-        obstacles=(),
-        formation=FormationParams(),
-        formation_enabled=True,
-        arena_min_m=np.array([-20.0, -20.0, 3.0]),
-        arena_max_m=np.array([20.0, 20.0, 10.0]),
-        d_des_range_m=Range(3.0, 18.5),
-        h_des_range_m=Range(2.1, 9.1),
-    )
-
-
 @pytest.fixture
 def ui_and_actions() -> Iterator[tuple[OperatorUi, Actions]]:
     actions = Actions()
-    ui = OperatorUi(actions=actions, initial=view(), port=0)
+    ui = OperatorUi(actions=actions, initial=scene_view([flying_mav()]), port=0)
     try:
         yield ui, actions
     finally:

@@ -6,26 +6,19 @@ import math
 
 import numpy as np
 import pytest
+from scene_views import flying_mav, scene_view
 
 from controller.messages import PersonEstimate
-from controller.params import FormationParams
 from webui.plots import PlotHistory, with_gaps
-from webui.view import PersonEstimateView, Range, SceneView, VehicleView
+from webui.view import PersonEstimateView, SceneView
 
 
 def view(t: float, *, estimate: bool = True, stale: int | None = None) -> SceneView:
     vehicles = tuple(
-        VehicleView(
-            vehicle_id=i,
-            phase="formation",
-            mode="offboard",
-            armed=True,
-            in_air=True,
-            in_formation=True,
+        flying_mav(
+            i,
             position_m=np.array([0.0, 0.0, 9.0 + i]),
             velocity_mps=np.array([3.0, 4.0, 0.0]) * i,
-            yaw_rad=0.0,
-            link_age_s=0.0,
             link_stale=i == stale,
         )
         for i in (1, 2)
@@ -34,16 +27,9 @@ def view(t: float, *, estimate: bool = True, stale: int | None = None) -> SceneV
     person = PersonEstimate(
         stamp_s=t, position_m=np.array([0.0, 0.0, 0.9]), velocity_mps=np.zeros(3), cov=cov
     )
-    return SceneView(
+    return scene_view(
+        vehicles,
         time_s=t,
-        vehicles=vehicles,
-        obstacles=(),
-        formation=FormationParams(),
-        formation_enabled=True,
-        arena_min_m=np.array([-20.0, -20.0, 3.0]),
-        arena_max_m=np.array([20.0, 20.0, 10.0]),
-        d_des_range_m=Range(3.0, 18.5),
-        h_des_range_m=Range(2.1, 9.1),
         person_estimate=PersonEstimateView.of(person) if estimate else None,
         tracking_error_m=0.4 if estimate else None,
     )

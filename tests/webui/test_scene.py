@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import viser
+from scene_views import scene_view
 
 from controller.messages import Obstacle, PersonEstimate
-from controller.params import FormationParams
 from webui.geometry import VEHICLE_COLORS, vehicle_color
 from webui.scene import (
     CIRCLE_COLOR,
@@ -54,16 +54,10 @@ def view(*, obstacles=(), variances=(0.25, 0.04, 0.01), origin=None) -> SceneVie
     estimate = PersonEstimate(
         stamp_s=1.0, position_m=np.array([0.5, 0.0, 0.9]), velocity_mps=np.array([0.0, 0.0, 0.0]), cov=full
     )
-    return SceneView(
-        time_s=1.0,
-        vehicles=(vehicle(1), vehicle(2, phase="landing")),
+    return scene_view(
+        (vehicle(1), vehicle(2, phase="landing")),
         obstacles=tuple(obstacles),
-        formation=FormationParams(),
-        formation_enabled=True,
-        arena_min_m=np.array([-20, -20, 3]),
-        arena_max_m=np.array([20, 20, 10]),
         d_des_range_m=Range(1.8, 18.5),
-        h_des_range_m=Range(2.1, 9.1),
         person_truth_m=np.array([0.0, 0.0, 0.9]),
         person_estimate=PersonEstimateView.of(estimate),
         estimate_source_id=1,

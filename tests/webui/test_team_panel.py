@@ -2,29 +2,10 @@
 
 from __future__ import annotations
 
-import dataclasses
-
-import numpy as np
 import pytest
+from scene_views import flying_mav
 
 from webui.team_panel import releasable
-from webui.view import VehicleView
-
-
-def mav(**changes) -> VehicleView:
-    base = VehicleView(
-        vehicle_id=1,
-        phase="formation",
-        mode="offboard",
-        armed=True,
-        in_air=True,
-        in_formation=True,
-        position_m=np.array([0.0, 0.0, 9.0]),
-        yaw_rad=0.0,
-        link_age_s=0.0,
-        link_stale=False,
-    )
-    return dataclasses.replace(base, **changes)
 
 
 @pytest.mark.parametrize(
@@ -42,4 +23,4 @@ def mav(**changes) -> VehicleView:
     ],
 )
 def test_release_is_offered_for_a_landed_holding_or_free_airborne_mav_only(changes, offered):
-    assert releasable(mav(**changes)) is offered
+    assert releasable(flying_mav(**changes)) is offered
