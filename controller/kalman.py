@@ -41,6 +41,30 @@ class CompiledKalman:
 
 
 @numba.njit(cache=True)
+def innovation_upper(P, R):  # pragma: no cover - compiled
+    """(a, b, c, d, e, f): the upper triangle of the innovation covariance S = H P H^T + R = P[:3, :3] + R
+    (S = [[a, b, c], [b, d, e], [c, e, f]]), for the update and for the tracker's gate."""
+    return (
+        P[0, 0] + R[0, 0],
+        P[0, 1] + R[0, 1],
+        P[0, 2] + R[0, 2],
+        P[1, 1] + R[1, 1],
+        P[1, 2] + R[1, 2],
+        P[2, 2] + R[2, 2],
+    )
+
+
+@numba.njit(cache=True)
+def symmetric_adjugate(a, b, c, d, e, f):  # pragma: no cover - compiled
+    """(aa, ab, ac, bb, bc, cc, det): the upper triangle of the adjugate of the symmetric S = [[a, b, c],
+    [b, d, e], [c, e, f]] and its determinant, on plain floats (S^-1 = adj / det): the update's gain and the
+    tracker's gate (tracker._mahalanobis_sq) both invert S this way."""
+    aa, ab, ac = d * f - e * e, c * e - b * f, b * e - c * d
+    det = a * aa + b * ab + c * ac
+    return aa, ab, ac, a * f - c * c, b * c - a * e, a * d - b * b, det
+
+
+@numba.njit(cache=True)
 def predicted(F, Q, x, P):  # pragma: no cover - compiled; tested against filterpy
     """(F x (6, 1), F P F^T + Q (6, 6)) as new arrays."""
     x_new = np.zeros((6, 1))
@@ -65,13 +89,11 @@ def updated(z, R, x, P):  # pragma: no cover - compiled; tested against filterpy
     """(x, P) after fusing the position z (3, 1) measured with covariance R (3, 3), as new arrays (module
     docstring)."""
     # S = P[:3, :3] + R and its inverse by the adjugate (S symmetric positive definite)
-    a, b, c = P[0, 0] + R[0, 0], P[0, 1] + R[0, 1], P[0, 2] + R[0, 2]
-    d, e, f = P[1, 1] + R[1, 1], P[1, 2] + R[1, 2], P[2, 2] + R[2, 2]
+    aa, ab, ac, bb, bc, cc, det = symmetric_adjugate(*innovation_upper(P, R))
     adj = np.empty((3, 3))
-    adj[0, 0], adj[0, 1], adj[0, 2] = d * f - e * e, c * e - b * f, b * e - c * d
-    adj[1, 1], adj[1, 2], adj[2, 2] = a * f - c * c, b * c - a * e, a * d - b * b
-    adj[1, 0], adj[2, 0], adj[2, 1] = adj[0, 1], adj[0, 2], adj[1, 2]
-    det = a * adj[0, 0] + b * adj[0, 1] + c * adj[0, 2]
+    adj[0, 0], adj[0, 1], adj[0, 2] = aa, ab, ac
+    adj[1, 0], adj[1, 1], adj[1, 2] = ab, bb, bc
+    adj[2, 0], adj[2, 1], adj[2, 2] = ac, bc, cc
     # K = P H^T S^-1 = P[:, :3] S^-1 (6, 3)
     gain = np.zeros((6, 3))
     for i in range(6):

@@ -42,7 +42,7 @@ import numba
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from controller.kalman import CompiledKalman
+from controller.kalman import CompiledKalman, innovation_upper, symmetric_adjugate
 from controller.messages import Detection, PersonEstimate, read_only
 
 KALMAN_FILTERS = ("filterpy", "compiled")
@@ -368,30 +368,20 @@ class PersonTracker:
 
 @numba.njit(cache=True)
 def _gate_distance_sq(x, P, z, R):  # pragma: no cover - compiled
-    """`_mahalanobis_sq` of z (3, 1) from the predicted x (6, 1), P (6, 6), with S = P[:3, :3] + R (its upper
-    triangle) and y = z - x[:3]: one compiled call, as every detection of every teammate is gated."""
-    return _mahalanobis_sq(
-        P[0, 0] + R[0, 0],
-        P[0, 1] + R[0, 1],
-        P[0, 2] + R[0, 2],
-        P[1, 1] + R[1, 1],
-        P[1, 2] + R[1, 2],
-        P[2, 2] + R[2, 2],
-        z[0, 0] - x[0, 0],
-        z[1, 0] - x[1, 0],
-        z[2, 0] - x[2, 0],
-    )
+    """`_mahalanobis_sq` of z (3, 1) from the predicted x (6, 1), P (6, 6), with S = P[:3, :3] + R
+    (`kalman.innovation_upper`) and y = z - x[:3]: one compiled call, as every detection of every teammate is
+    gated."""
+    return _mahalanobis_sq(*innovation_upper(P, R), z[0, 0] - x[0, 0], z[1, 0] - x[1, 0], z[2, 0] - x[2, 0])
 
 
 @numba.njit(cache=True)
 def _mahalanobis_sq(a, b, c, d, e, f, u, v, w):  # pragma: no cover - compiled; tested against its py_func
     """y^T S^-1 y for the symmetric S = [[a, b, c], [b, d, e], [c, e, f]] and y = (u, v, w) by the adjugate of
-    S; inf when S is not positive definite. Plain floats: for 3x3 this is far cheaper than numpy.linalg."""
-    adj_aa, adj_ab, adj_ac = d * f - e * e, c * e - b * f, b * e - c * d
-    det = a * adj_aa + b * adj_ab + c * adj_ac
-    if not (a > 0.0 and a * d - b * b > 0.0 and det > 0.0):
+    S (`kalman.symmetric_adjugate`); inf when S is not positive definite (Sylvester: a, the leading 2x2 minor
+    adj_cc and det all > 0). Plain floats: for 3x3 this is far cheaper than numpy.linalg."""
+    adj_aa, adj_ab, adj_ac, adj_bb, adj_bc, adj_cc, det = symmetric_adjugate(a, b, c, d, e, f)
+    if not (a > 0.0 and adj_cc > 0.0 and det > 0.0):
         return math.inf
-    adj_bb, adj_bc, adj_cc = a * f - c * c, b * c - a * e, a * d - b * b
     quad = (
         adj_aa * u * u
         + adj_bb * v * v

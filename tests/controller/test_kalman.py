@@ -8,7 +8,7 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from controller.kalman import CompiledKalman
-from controller.tracker import TrackerParams, transition
+from controller.tracker import TrackerParams, _kalman_filter, transition
 
 INSTANCES = 1000
 RTOL = 1e-12  # relative to the largest entry of the compared array (measured: at most 4.4e-14)
@@ -27,15 +27,11 @@ def _instance(rng: np.random.Generator):
     return x, _spd(rng, 6, 10.0 ** rng.uniform(-3.0, 1.0))
 
 
-def _filterpy(x: np.ndarray, P: np.ndarray) -> KalmanFilter:
-    kf = KalmanFilter(dim_x=6, dim_z=3)
-    kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
-    kf.x, kf.P = x.copy(), P.copy()
-    return kf
-
-
-def _compiled(x: np.ndarray, P: np.ndarray) -> CompiledKalman:
-    kf = CompiledKalman()
+def _started(kind: str, x: np.ndarray, P: np.ndarray):
+    """The tracker's filter of `kind` (tracker._kalman_filter) holding x (6, 1), P (6, 6): filterpy's own
+    KalmanFilter for "filterpy", so the reference is never the code under test."""
+    kf = _kalman_filter(kind)
+    assert type(kf) is {"filterpy": KalmanFilter, "compiled": CompiledKalman}[kind]
     kf.x, kf.P = x.copy(), P.copy()
     return kf
 
@@ -52,7 +48,7 @@ def test_predict_is_filterpys_on_1000_random_steps():
     for _ in range(INSTANCES):
         x, P = _instance(rng)
         F, Q = transition(dt_s=float(rng.uniform(1e-3, 2.0)), params=params)
-        reference, ours = _filterpy(x, P), _compiled(x, P)
+        reference, ours = _started("filterpy", x, P), _started("compiled", x, P)
         reference.predict(F=F, Q=Q)
         ours.predict(F=F, Q=Q)
         worst_x = max(worst_x, _worst(ours.x, reference.x))
@@ -68,7 +64,7 @@ def test_update_is_filterpys_on_1000_random_detections():
         x, P = _instance(rng)
         z = x[:3] + rng.normal(0.0, 1.0, (3, 1))
         R = _spd(rng, 3, 10.0 ** rng.uniform(-2.0, 1.0))
-        reference, ours = _filterpy(x, P), _compiled(x, P)
+        reference, ours = _started("filterpy", x, P), _started("compiled", x, P)
         reference.update(z, R=R)
         ours.update(z, R=R)
         worst_x = max(worst_x, _worst(ours.x, reference.x))
@@ -80,7 +76,7 @@ def test_update_is_filterpys_on_1000_random_detections():
 def test_predict_and_update_replace_the_state_arrays_as_filterpy_does():
     """The tracker keeps the arrays it had before a step to restore them (a gated detection, a late one):
     a step must not write into them."""
-    kf = _compiled(np.ones((6, 1)), np.eye(6))
+    kf = _started("compiled", np.ones((6, 1)), np.eye(6))
     x_before, P_before = kf.x, kf.P
     F, Q = transition(dt_s=0.1, params=TrackerParams())
     kf.predict(F=F, Q=Q)
@@ -99,7 +95,7 @@ def test_update_holds_at_extreme_covariance_scales(scale):
     P = P / np.abs(P).max() * scale
     R = _spd(rng, 3, scale)
     z = x[:3] + 0.1
-    reference, ours = _filterpy(x, P), _compiled(x, P)
+    reference, ours = _started("filterpy", x, P), _started("compiled", x, P)
     reference.update(z, R=R)
     ours.update(z, R=R)
     assert _worst(ours.x, reference.x) < RTOL

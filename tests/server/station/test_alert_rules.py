@@ -2,53 +2,27 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 import pytest
+from scene_views import flying_mav, scene_view
 
 from controller.messages import Obstacle
-from controller.params import FormationParams
 from server.station.alert_rules import AlertParams, conditions
-from webui.view import AgentView, PaceView, Range, SceneView, Severity, VehicleView
+from webui.view import AgentView, PaceView, SceneView, Severity, VehicleView
 
 PARAMS = AlertParams()  # d_min 1.5 m, margin 0.5 m, battery 25 % / 15 %
 
 
 def mav(vehicle_id: int, position=(0.0, 0.0, 9.0), **changes) -> VehicleView:
-    base = VehicleView(
-        vehicle_id=vehicle_id,
-        phase="formation",
-        mode="offboard",
-        armed=True,
-        in_air=True,
-        in_formation=True,
-        position_m=np.array(position, dtype=float),
-        yaw_rad=0.0,
-        link_age_s=0.0,
-        link_stale=False,
-        solve_status="solved",
-        solver_time_s=2e-4,
-        battery_fraction=0.9,
-        plan_age_s=0.0,
-    )
-    return dataclasses.replace(base, **changes)
+    """A MAV in formation flight at `position` (m), its solver and battery healthy."""
+    healthy = {"solve_status": "solved", "solver_time_s": 2e-4, "battery_fraction": 0.9, "plan_age_s": 0.0}
+    return flying_mav(vehicle_id, **(healthy | {"position_m": np.array(position, dtype=float)} | changes))
 
 
 def scene(*vehicles: VehicleView, obstacles=(), pace: PaceView | None = None) -> SceneView:
-    return SceneView(
-        time_s=10.0,
-        vehicles=tuple(vehicles),
-        obstacles=tuple(obstacles),
-        formation=FormationParams(),
-        formation_enabled=True,
-        arena_min_m=np.array([-20.0, -20.0, 3.0]),
-        arena_max_m=np.array([20.0, 20.0, 10.0]),
-        d_des_range_m=Range(3.0, 18.5),
-        h_des_range_m=Range(2.1, 9.1),
-        pace=pace,
-    )
+    return scene_view(vehicles, time_s=10.0, obstacles=tuple(obstacles), pace=pace)
 
 
 def kinds(view: SceneView) -> dict[str, Severity]:

@@ -1,5 +1,5 @@
-"""Operator views for the webui's tests: a MAV in formation flight and a scene around a team, each changed by
-keyword where a test needs something else."""
+"""Operator views for the tests of the operator page and of the alert rules: a MAV in formation flight and a
+scene around a team, each changed by keyword where a test needs something else."""
 
 from __future__ import annotations
 
