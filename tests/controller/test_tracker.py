@@ -17,6 +17,8 @@ from controller.tracker import (
     TrackerParams,
     Verdict,
     _gate_distance_sq,
+    _inverse,
+    _kalman_filter,
     _mahalanobis_sq,
     transition,
 )
@@ -478,3 +480,20 @@ def test_the_compiled_filter_gives_filterpys_verdicts_and_estimates_with_late_an
 def test_an_unknown_kalman_filter_is_refused_naming_the_choices():
     with pytest.raises(ValueError, match="filterpy.*compiled"):
         TrackerParams(kalman_filter="ukf")
+
+
+def test_filterpys_inverse_hook_is_numpys_inverse_to_the_bit():
+    """filterpy's update inverts S through `_inverse`: numpy's own inverse, bit for bit, on innovation
+    covariances from 1e-6 to 1e6 m^2."""
+    rng = np.random.default_rng(7)
+    assert _kalman_filter("filterpy").inv is _inverse
+    for scale in (1e-6, 1.0, 1e6):
+        for _ in range(300):
+            a = rng.normal(size=(3, 3))
+            s = scale * (a @ a.T + 0.01 * np.eye(3))
+            assert np.array_equal(_inverse(s), np.linalg.inv(s))
+
+
+def test_a_singular_innovation_covariance_raises_as_numpys_inverse_does():
+    with pytest.warns(RuntimeWarning), pytest.raises(np.linalg.LinAlgError, match="Singular"):
+        _inverse(np.ones((3, 3)))
