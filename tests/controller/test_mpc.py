@@ -3,7 +3,10 @@ docs/method.md#infeasible-qps."""
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import replace
+from typing import NamedTuple
 
 import cvxpy as cp
 import numpy as np
@@ -86,23 +89,48 @@ def reference_input_box(params: MpcParams, f: np.ndarray) -> tuple[np.ndarray, n
     return lo, hi
 
 
-def cvxpy_mpc_problem(
-    params: MpcParams, case: dict, planes: HalfPlanes | None = None
-) -> tuple[cp.Problem, cp.Variable, cp.Variable, cp.Variable]:
-    """The MPC's QP written from the equations, states as variables, with the soft half-planes if given (the
-    slack w(n) shared by the rows of plan step n); returns (problem, u, positions, velocities) to solve."""
+def psd_root(weight: np.ndarray) -> np.ndarray:
+    """R with R^T R = weight (symmetric PSD), so that x^T W x = |R x|^2: by the eigen-decomposition, which a
+    singular W does not stop (a Cholesky factorisation would)."""
+    eig, vec = np.linalg.eigh(weight)
+    return np.sqrt(np.clip(eig, 0.0, None))[:, None] * vec.T
+
+
+class MpcModel(NamedTuple):
+    """A CVXPY model of the MPC's QP (`mpc_model`): the problem, its variables u, positions and velocities,
+    and `load`, which sets its parameters to one instance (case, half-planes)."""
+
+    problem: cp.Problem
+    u: cp.Variable
+    p: cp.Variable
+    v: cp.Variable
+    load: Callable[[dict, HalfPlanes | None], None]
+
+
+@functools.cache
+def mpc_model(params: MpcParams, plane_rows: int) -> MpcModel:
+    """The MPC's QP written from the equations, states as variables, with room for `plane_rows` soft
+    half-plane rows a^T p(n) + w(n) >= b (the slack w(n) shared by the rows of plan step n; unused rows read
+    0 >= -1). The instance's data are CVXPY parameters: built once per (params, plane_rows), as CVXPY's
+    canonicalisation is most of a solve's time, and each instance only sets the parameters. A terminal weight
+    W enters as w0 |R x(M) - R x_ref|^2 with R^T R = W / w0 (w0 the params' scalar weight) and R x_ref set in
+    numpy (a product of two parameters is not DPP): HiGHS then ends as near the exact vertex as with
+    quad_form(x(M) - x_ref, W), about 5e-8; with w0 = 1, or with x(M) - x_ref as a variable, up to 4e-7."""
     dt, m = params.dt_s, params.horizon_steps + 1
     g = params.gravity_vector_mps2
-    f = case["external_inputs_mps2"]
+    x0, v0 = cp.Parameter(3), cp.Parameter(3)
+    f, u_lo, u_hi = (cp.Parameter((m, 3)) for _ in range(3))
+    wp_root, wv_root = cp.Parameter((3, 3)), cp.Parameter((3, 3))  # R of W / w0
+    wp_ref, wv_ref = cp.Parameter(3), cp.Parameter(3)  # R p_ref, R v_ref
+    wp0, wv0 = params.terminal_position_weight, params.terminal_velocity_weight
     u, p, v, s = cp.Variable((m, 3)), cp.Variable((m + 1, 3)), cp.Variable((m + 1, 3)), cp.Variable(6)
     acc = u + f + g
     ones = np.ones((m, 1))
     s_pos = ones @ cp.reshape(s[:3], (1, 3), order="C")
     s_vel = ones @ cp.reshape(s[3:], (1, 3), order="C")
-    u_lo, u_hi = reference_input_box(params, f)
     constraints = [
-        p[0] == case["position_m"],
-        v[0] == case["velocity_mps"],
+        p[0] == x0,
+        v[0] == v0,
         p[1:] == p[:-1] + dt * v[:-1] + 0.5 * dt * dt * acc,
         v[1:] == v[:-1] + dt * acc,
         u >= u_lo,
@@ -116,20 +144,57 @@ def cvxpy_mpc_problem(
     offset = {"hover": np.tile(g, (m, 1)), "planned": f + g, "raw": np.zeros((m, 3))}[params.effort]
     cost = (
         params.input_weight * cp.sum_squares(u + offset)
-        + cp.quad_form(p[m] - case["target_position_m"], case["terminal_position_weight"])
-        + cp.quad_form(v[m] - case["target_velocity_mps"], case["terminal_velocity_weight"])
+        + wp0 * cp.sum_squares(wp_root @ p[m] - wp_ref)
+        + wv0 * cp.sum_squares(wv_root @ v[m] - wv_ref)
         + params.slack_weight * cp.sum(s)
         + params.slack_quadratic_weight * cp.sum_squares(s)
     )
-    if planes is not None:
-        steps = sorted({int(n) for n in planes.steps})
-        w = cp.Variable(len(steps))
-        constraints += [w >= 0]
-        rows = zip(planes.steps, planes.normals_xy, planes.z_normals, planes.offsets, strict=True)
-        for n, a, a_z, b in rows:
-            constraints.append(a @ p[int(n), :2] + a_z * p[int(n), 2] + w[steps.index(int(n))] >= b)
+    room = max(plane_rows, 1)  # the half-plane rows' parameters, in the problem if plane_rows > 0
+    normals = cp.Parameter((room, 3 * (m + 1)))  # row r's normal at the columns of p(steps[r])
+    slack_of_row = cp.Parameter((room, m))  # 1 at the column of w(steps[r]) (w(n) at n - 1)
+    offsets = cp.Parameter(room)
+    if plane_rows:
+        w = cp.Variable(m)
+        p_flat = cp.reshape(p, (3 * (m + 1),), order="C")  # p(n) at columns 3n..3n+2
+        constraints += [normals @ p_flat + slack_of_row @ w >= offsets, w >= 0]
         cost += params.half_plane_weight * cp.sum(w) + params.half_plane_quadratic_weight * cp.sum_squares(w)
-    return cp.Problem(cp.Minimize(cost), constraints), u, p, v
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    assert problem.is_dpp()
+
+    def load(case: dict, planes: HalfPlanes | None) -> None:
+        x0.value, v0.value = case["position_m"], case["velocity_mps"]
+        f.value = case["external_inputs_mps2"]
+        u_lo.value, u_hi.value = reference_input_box(params, case["external_inputs_mps2"])
+        root_p = psd_root(case["terminal_position_weight"] / wp0)
+        root_v = psd_root(case["terminal_velocity_weight"] / wv0)
+        wp_root.value, wp_ref.value = root_p, root_p @ case["target_position_m"]
+        wv_root.value, wv_ref.value = root_v, root_v @ case["target_velocity_mps"]
+        if plane_rows:
+            a, slack = np.zeros((plane_rows, 3 * (m + 1))), np.zeros((plane_rows, m))
+            b = np.full(plane_rows, -1.0)
+            if planes is not None:
+                rows = zip(planes.steps, planes.normals_xy, planes.z_normals, planes.offsets, strict=True)
+                for r, (n, a_xy, a_z, b_r) in enumerate(rows):
+                    a[r, 3 * n : 3 * n + 3] = a_xy[0], a_xy[1], a_z
+                    slack[r, n - 1], b[r] = 1.0, b_r
+            normals.value, slack_of_row.value, offsets.value = a, slack, b
+
+    return MpcModel(problem, u, p, v, load)
+
+
+PLANE_ROWS = 16  # the models' room for half-plane rows grows in steps of 16 rows
+
+
+def cvxpy_mpc_problem(
+    params: MpcParams, case: dict, planes: HalfPlanes | None = None
+) -> tuple[cp.Problem, cp.Variable, cp.Variable, cp.Variable]:
+    """The MPC's QP written from the equations, states as variables, with the soft half-planes if given (the
+    slack w(n) shared by the rows of plan step n); returns (problem, u, positions, velocities) to solve: the
+    `mpc_model` with room for them (their count rounded up to PLANE_ROWS' multiple), set to this instance."""
+    rows = 0 if planes is None else len(planes.steps)
+    model = mpc_model(params, -(-rows // PLANE_ROWS) * PLANE_ROWS)
+    model.load(case, planes)
+    return model.problem, model.u, model.p, model.v
 
 
 def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -142,6 +207,7 @@ def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarr
         tol_gap_rel=1e-10,
         tol_feas=1e-10,
         tol_ktratio=1e-10,
+        warm_start=False,  # each instance solved on its own, not from the last one's solution
     )
     assert problem.status == cp.OPTIMAL
     assert u.value is not None and p.value is not None and v.value is not None

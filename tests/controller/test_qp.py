@@ -4,12 +4,15 @@ them with active constraints."""
 
 from __future__ import annotations
 
+import functools
+from typing import NamedTuple
+
 import cvxpy as cp
 import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
-from test_mpc import KINDS, cvxpy_mpc_problem, random_case
+from test_mpc import KINDS, cvxpy_mpc_problem, psd_root, random_case
 
 from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
 from controller.qp import ExactQp
@@ -37,14 +40,53 @@ def osqp_reference(p, q, a, lo, hi) -> np.ndarray:
     return np.asarray(result.x)
 
 
+class QpModel(NamedTuple):
+    """A CVXPY model of a generic QP (`qp_model`): the problem, its variable x and its parameters."""
+
+    problem: cp.Problem
+    x: cp.Variable
+    root: cp.Parameter  # R with R^T R = P
+    q: cp.Parameter
+    a_hi: cp.Parameter  # A with the rows of an infinite upper bound zeroed
+    hi: cp.Parameter  # the upper bounds, 1 where infinite
+    a_lo: cp.Parameter
+    lo: cp.Parameter  # the lower bounds, -1 where infinite
+
+
+@functools.cache
+def qp_model(n: int, rows: int) -> QpModel:
+    """min x^T P x / 2 + q^T x with A x <= hi and A x >= lo over n variables and `rows` rows, written as
+    |R x|^2 / 2 + q^T x, the side of a row whose bound is infinite as 0 <= 1 (or 0 >= -1), with P (through R),
+    q, A and the bounds as CVXPY parameters: built once per shape, as CVXPY's canonicalisation is most of a
+    solve's time, and each instance only sets the parameters."""
+    x = cp.Variable(n)
+    root, q = cp.Parameter((n, n)), cp.Parameter(n)
+    a_hi, a_lo = cp.Parameter((rows, n)), cp.Parameter((rows, n))
+    hi, lo = cp.Parameter(rows), cp.Parameter(rows)
+    objective = cp.Minimize(0.5 * cp.sum_squares(root @ x) + q @ x)
+    problem = cp.Problem(objective, [a_hi @ x <= hi, a_lo @ x >= lo])
+    assert problem.is_dpp()
+    return QpModel(problem, x, root, q, a_hi, hi, a_lo, lo)
+
+
 def cvxpy_qp_reference(p, q, a, lo, hi) -> np.ndarray:
-    x = cp.Variable(p.shape[0])
+    """min x^T P x / 2 + q^T x, lo <= A x <= hi by CVXPY + Clarabel at 1e-11 (`qp_model`)."""
+    rows, n = a.shape
+    model = qp_model(n, rows)
     finite_hi, finite_lo = np.isfinite(hi), np.isfinite(lo)
-    constraints = [a[finite_hi] @ x <= hi[finite_hi], a[finite_lo] @ x >= lo[finite_lo]]
-    problem = cp.Problem(cp.Minimize(0.5 * cp.quad_form(x, cp.psd_wrap(p)) + q @ x), constraints)
-    problem.solve(solver=cp.CLARABEL, tol_gap_abs=1e-11, tol_gap_rel=1e-11, tol_feas=1e-11, tol_ktratio=1e-11)
-    assert problem.status == cp.OPTIMAL
-    return np.asarray(x.value)
+    model.root.value, model.q.value = psd_root(p), q
+    model.a_hi.value, model.hi.value = np.where(finite_hi[:, None], a, 0.0), np.where(finite_hi, hi, 1.0)
+    model.a_lo.value, model.lo.value = np.where(finite_lo[:, None], a, 0.0), np.where(finite_lo, lo, -1.0)
+    model.problem.solve(
+        solver=cp.CLARABEL,
+        tol_gap_abs=1e-11,
+        tol_gap_rel=1e-11,
+        tol_feas=1e-11,
+        tol_ktratio=1e-11,
+        warm_start=False,  # each instance solved on its own, not from the last one's solution
+    )
+    assert model.problem.status == cp.OPTIMAL
+    return np.asarray(model.x.value)
 
 
 def soft_block_problem(rng: np.random.Generator, *, coupled: bool):
@@ -223,11 +265,12 @@ def cvxpy_mpc_reference(
     it on these degenerate instances, inputs at their bounds, whatever its tolerances; OSQP at 1e-11 with
     polishing ends "inaccurate" on some instances with one half-plane slack per plan step.)"""
     problem, u, p, v = cvxpy_mpc_problem(params, case, planes)
+    cold = dict(canon_backend=cp.SCIPY_CANON_BACKEND, warm_start=False)  # not from the last instance's answer
     try:
-        problem.solve(solver=cp.HIGHS, canon_backend=cp.SCIPY_CANON_BACKEND)
+        problem.solve(solver=cp.HIGHS, **cold)
     except cp.SolverError:  # HiGHS's QP solver ends in "Solve error" on a few instances (2 of the 200 here,
         # where the input box is shifted by f): then OSQP at 1e-12, polished, which solves those exactly
-        problem.solve(solver=cp.OSQP, eps_abs=1e-12, eps_rel=1e-12, max_iter=400_000, polishing=True)
+        problem.solve(solver=cp.OSQP, eps_abs=1e-12, eps_rel=1e-12, max_iter=400_000, polishing=True, **cold)
     assert problem.status == cp.OPTIMAL
     assert u.value is not None and p.value is not None and v.value is not None
     return u.value, p.value, v.value
@@ -279,18 +322,18 @@ def mpc_results():
     return out
 
 
-@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
+@pytest.mark.slow  # 200 instances through CVXPY and three controllers: about 6 s of CPU
 def test_mpc_exact_inputs_match_osqp(mpc_results):
     assert all(ours.ok and ref.ok for ours, ref, _, _ in mpc_results)
     assert max(np.max(np.abs(ours.inputs_mps2 - ref.inputs_mps2)) for ours, ref, _, _ in mpc_results) < TOL
 
 
-@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
+@pytest.mark.slow  # 200 instances through CVXPY and three controllers: about 6 s of CPU
 def test_mpc_exact_inputs_match_cvxpy(mpc_results):
     assert max(np.max(np.abs(ours.inputs_mps2 - cvx[0])) for ours, _, cvx, _ in mpc_results) < TOL
 
 
-@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
+@pytest.mark.slow  # 200 instances through CVXPY and three controllers: about 6 s of CPU
 def test_mpc_exact_plan_matches_cvxpy(mpc_results):
     errors = [
         max(np.max(np.abs(ours.positions_m - cvx[1])), np.max(np.abs(ours.velocities_mps - cvx[2])))
@@ -299,7 +342,7 @@ def test_mpc_exact_plan_matches_cvxpy(mpc_results):
     assert max(errors) < TOL
 
 
-@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
+@pytest.mark.slow  # 200 instances through CVXPY and three controllers: about 6 s of CPU
 def test_mpc_compiled_active_set_matches_cvxpy(mpc_results):
     """The compiled active-set step: the same inputs and plan as CVXPY's, by the same solver path."""
     assert all(comp.ok and comp.path == ours.path for ours, _, _, comp in mpc_results)
@@ -307,7 +350,7 @@ def test_mpc_compiled_active_set_matches_cvxpy(mpc_results):
     assert max(np.max(np.abs(comp.positions_m - cvx[1])) for _, _, cvx, comp in mpc_results) < TOL
 
 
-@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
+@pytest.mark.slow  # 200 instances through CVXPY and three controllers: about 6 s of CPU
 def test_mpc_instances_are_mostly_constrained(mpc_results):
     """At least half of the 200 need the active-set solver (a bound or a saturated input is active); the
     flight-like ones mostly do not."""
@@ -316,7 +359,7 @@ def test_mpc_instances_are_mostly_constrained(mpc_results):
     assert len(paths) - paths.count("closed_form") >= MPC_CASES // 2
 
 
-@pytest.mark.slow  # 200 instances through CVXPY: about 13 s of CPU
+@pytest.mark.slow  # 200 instances through CVXPY and three controllers: about 6 s of CPU
 def test_mpc_exact_reports_the_same_violation_as_osqp(mpc_results):
     for ours, ref, _, _ in mpc_results:
         assert ours.max_state_violation == pytest.approx(ref.max_state_violation, abs=1e-6)

@@ -408,7 +408,7 @@ def _active(planes: HalfPlanes, positions: np.ndarray, tol: float = 1e-6) -> int
     return int(np.count_nonzero(row_margins(planes, positions) <= tol))
 
 
-@pytest.mark.slow  # 60 QPs through CVXPY: about 5 s
+@pytest.mark.slow  # 60 QPs through CVXPY: about 1.5 s
 def test_at_least_50_separation_qps_have_active_rows(separation_qps):
     assert sum(_active(planes, ours.positions_m) > 0 for ours, planes, _, _ in separation_qps) >= 50
 
