@@ -266,21 +266,29 @@ def random_case(rng: np.random.Generator, kind: str) -> dict:
 KINDS = ("nominal", "position_bound", "velocity_bound", "far_target", "large_force", "formation")
 
 
-@pytest.fixture(scope="module", params=SOLVERS)
-def compared(request) -> list[tuple[str, MpcSolution, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
-    """60 seeded instances, 10 per kind, effort modes in turn, for each solver; one controller per mode is
-    reused, so the solves also exercise warm starts from unrelated problems and terminal-weight updates."""
+@pytest.fixture(scope="module")
+def references() -> list[tuple[str, dict, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """60 seeded instances, 10 per kind, effort modes in turn, each with its CVXPY reference (solved once for
+    both solvers): (effort mode, solve() keywords, reference)."""
     rng = np.random.default_rng(20261123)
     modes = ("hover", "planned", "raw")
-    controllers = {
-        mode: ModelPredictiveController(MpcParams(effort=mode, solver=request.param)) for mode in modes
-    }
-    results = []
+    out = []
     for i in range(60):
         mode = modes[i % 3]
         case = random_case(rng, KINDS[i % len(KINDS)])
-        results.append((mode, controllers[mode].solve(**case), cvxpy_reference(MpcParams(effort=mode), case)))
-    return results
+        out.append((mode, case, cvxpy_reference(MpcParams(effort=mode), case)))
+    return out
+
+
+@pytest.fixture(scope="module", params=SOLVERS)
+def compared(request, references) -> list[tuple[str, MpcSolution, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """The `references` solved by each solver; one controller per mode is reused, so the solves also exercise
+    warm starts from unrelated problems and terminal-weight updates."""
+    controllers = {
+        mode: ModelPredictiveController(MpcParams(effort=mode, solver=request.param))
+        for mode in ("hover", "planned", "raw")
+    }
+    return [(mode, controllers[mode].solve(**case), ref) for mode, case, ref in references]
 
 
 @pytest.mark.slow  # an independent CVXPY model of 30 random QPs

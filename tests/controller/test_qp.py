@@ -1,6 +1,6 @@
 """Specification of the exact QP layer (controller/qp.py) and of the MPC's exact solver built on it: the same
-minimiser as OSQP (tight tolerances, polished) and as CVXPY + Clarabel, to 1e-6, on 260 instances, most of
-them with active constraints."""
+minimiser as OSQP (tight tolerances, polished) and as CVXPY (HiGHS for the MPC's QPs, Clarabel for the generic
+ones), to 1e-6, on 260 instances, most of them with active constraints."""
 
 from __future__ import annotations
 
@@ -297,7 +297,7 @@ REFERENCE = MpcParams(solver="osqp", eps_abs=1e-11, eps_rel=1e-11, max_iteration
 @pytest.fixture(scope="module")
 def mpc_results():
     """200 MPC instances of every kind (active state bounds, saturated inputs, huge forces, coupled terminal
-    weights), solved in sequence by one exact controller, one tight OSQP controller, CVXPY + Clarabel and an
+    weights), solved in sequence by one exact controller, one tight OSQP controller, CVXPY + HiGHS and an
     exact controller with the compiled active-set step (which none of them may hand to DAQP)."""
     rng = np.random.default_rng(20261128)
     exact = ModelPredictiveController(MpcParams(active_set="daqp"))
