@@ -235,7 +235,7 @@ def _kalman_filter(kind: str) -> KalmanFilter | CompiledKalman:
         return CompiledKalman()
     kf = KalmanFilter(dim_x=6, dim_z=3)
     kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
-    kf.inv = _inverse
+    kf.inv = _inverse  # pyright: ignore[reportAttributeAccessIssue] - typed from np.linalg.inv, same use
     return kf
 
 

@@ -486,7 +486,8 @@ def test_filterpys_inverse_hook_is_numpys_inverse_to_the_bit():
     """filterpy's update inverts S through `_inverse`: numpy's own inverse, bit for bit, on innovation
     covariances from 1e-6 to 1e6 m^2."""
     rng = np.random.default_rng(7)
-    assert _kalman_filter("filterpy").inv is _inverse
+    kf = _kalman_filter("filterpy")
+    assert isinstance(kf, KalmanFilter) and kf.inv is _inverse
     for scale in (1e-6, 1.0, 1e6):
         for _ in range(300):
             a = rng.normal(size=(3, 3))
