@@ -41,10 +41,12 @@ from enum import StrEnum
 import numba
 import numpy as np
 from filterpy.kalman import KalmanFilter
-from numpy.linalg import _umath_linalg  # numpy's LAPACK gufunc behind np.linalg.inv (`_inverse`)
 
 from controller.kalman import CompiledKalman, innovation_upper, symmetric_adjugate
 from controller.messages import Detection, PersonEstimate, read_only
+
+# numpy's LAPACK gufunc behind np.linalg.inv (`_inverse`): a private module, so without it np.linalg.inv
+_LAPACK_INVERSE = getattr(getattr(np.linalg, "_umath_linalg", None), "inv", None)
 
 KALMAN_FILTERS = ("filterpy", "compiled")
 
@@ -224,7 +226,9 @@ def _inverse(s: np.ndarray) -> np.ndarray:
     is fused). filterpy's update takes it through its `inv` hook. The gate lets only a positive definite S
     through; were S singular, the gufunc's NaN sends it to np.linalg.inv, which raises LinAlgError as before
     (after numpy's "invalid value" warning)."""
-    out = _umath_linalg.inv(s, signature="d->d")
+    if _LAPACK_INVERSE is None:
+        return np.linalg.inv(s)
+    out = _LAPACK_INVERSE(s, signature="d->d")
     return out if math.isfinite(sum(out.ravel().tolist())) else np.linalg.inv(s)
 
 
