@@ -197,19 +197,25 @@ def cvxpy_mpc_problem(
     return model.problem, model.u, model.p, model.v
 
 
+def solve_by_clarabel(problem: cp.Problem, tol: float, **options) -> None:
+    """Solve a reference problem by Clarabel with every tolerance at `tol`, cold (each instance on its own,
+    not from the last one's solution), and require an optimal status."""
+    problem.solve(
+        solver=cp.CLARABEL,
+        tol_gap_abs=tol,
+        tol_gap_rel=tol,
+        tol_feas=tol,
+        tol_ktratio=tol,
+        warm_start=False,
+        **options,
+    )
+    assert problem.status == cp.OPTIMAL
+
+
 def cvxpy_reference(params: MpcParams, case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`cvxpy_mpc_problem` solved by Clarabel at 1e-10; returns (u, positions, velocities)."""
     problem, u, p, v = cvxpy_mpc_problem(params, case)
-    problem.solve(
-        solver=cp.CLARABEL,
-        canon_backend=cp.SCIPY_CANON_BACKEND,
-        tol_gap_abs=1e-10,
-        tol_gap_rel=1e-10,
-        tol_feas=1e-10,
-        tol_ktratio=1e-10,
-        warm_start=False,  # each instance solved on its own, not from the last one's solution
-    )
-    assert problem.status == cp.OPTIMAL
+    solve_by_clarabel(problem, 1e-10, canon_backend=cp.SCIPY_CANON_BACKEND)
     assert u.value is not None and p.value is not None and v.value is not None
     return u.value, p.value, v.value
 
@@ -263,6 +269,7 @@ def random_case(rng: np.random.Generator, kind: str) -> dict:
     )
 
 
+EFFORT_MODES = ("hover", "planned", "raw")
 KINDS = ("nominal", "position_bound", "velocity_bound", "far_target", "large_force", "formation")
 
 
@@ -271,10 +278,9 @@ def references() -> list[tuple[str, dict, tuple[np.ndarray, np.ndarray, np.ndarr
     """60 seeded instances, 10 per kind, effort modes in turn, each with its CVXPY reference (solved once for
     both solvers): (effort mode, solve() keywords, reference)."""
     rng = np.random.default_rng(20261123)
-    modes = ("hover", "planned", "raw")
     out = []
     for i in range(60):
-        mode = modes[i % 3]
+        mode = EFFORT_MODES[i % 3]
         case = random_case(rng, KINDS[i % len(KINDS)])
         out.append((mode, case, cvxpy_reference(MpcParams(effort=mode), case)))
     return out
@@ -285,8 +291,7 @@ def compared(request, references) -> list[tuple[str, MpcSolution, tuple[np.ndarr
     """The `references` solved by each solver; one controller per mode is reused, so the solves also exercise
     warm starts from unrelated problems and terminal-weight updates."""
     controllers = {
-        mode: ModelPredictiveController(MpcParams(effort=mode, solver=request.param))
-        for mode in ("hover", "planned", "raw")
+        mode: ModelPredictiveController(MpcParams(effort=mode, solver=request.param)) for mode in EFFORT_MODES
     }
     return [(mode, controllers[mode].solve(**case), ref) for mode, case, ref in references]
 

@@ -12,7 +12,7 @@ import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
-from test_mpc import KINDS, cvxpy_mpc_problem, psd_root, random_case
+from test_mpc import KINDS, cvxpy_mpc_problem, psd_root, random_case, solve_by_clarabel
 
 from controller.mpc import HalfPlanes, ModelPredictiveController, MpcParams
 from controller.qp import ExactQp
@@ -77,15 +77,7 @@ def cvxpy_qp_reference(p, q, a, lo, hi) -> np.ndarray:
     model.root.value, model.q.value = psd_root(p), q
     model.a_hi.value, model.hi.value = np.where(finite_hi[:, None], a, 0.0), np.where(finite_hi, hi, 1.0)
     model.a_lo.value, model.lo.value = np.where(finite_lo[:, None], a, 0.0), np.where(finite_lo, lo, -1.0)
-    model.problem.solve(
-        solver=cp.CLARABEL,
-        tol_gap_abs=1e-11,
-        tol_gap_rel=1e-11,
-        tol_feas=1e-11,
-        tol_ktratio=1e-11,
-        warm_start=False,  # each instance solved on its own, not from the last one's solution
-    )
-    assert model.problem.status == cp.OPTIMAL
+    solve_by_clarabel(model.problem, 1e-11)
     return np.asarray(model.x.value)
 
 
