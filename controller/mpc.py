@@ -42,10 +42,14 @@ from controller.mpc_kernels import (
     CLOSED_FORM,
     INVALID,
     NEEDS_SOLVER,
+    PLANES_ACTIVE_SET,
+    PLANES_UNSOLVED,
+    checked_planes,
     half_plane_rows,
     plane_shortfall,
     rollout,
     solve_fast,
+    solve_with_planes,
 )
 from controller.qp import ACTIVE_SET_SOLVERS, ExactQp
 
@@ -340,10 +344,15 @@ class ModelPredictiveController:
     vehicle has moved along the previous plan: k = the plan step whose state is nearest the new x(0). At a
     control tick of dt_s that is one step (receding horizon); for an identical re-solve, or ticks much shorter
     than dt_s, it is zero. The MPC reads no clock, so it infers the elapsed steps from the state.
+
+    planes_in_one_call: with the compiled active set, a solve whose closed form failed only its half-planes
+    runs ExactQp.finish's steps and the rollout in one compiled call (mpc_kernels.solve_with_planes); False
+    sends it through ExactQp.finish, the readable path that call is tested against (same plans, same bits).
     """
 
-    def __init__(self, params: MpcParams) -> None:
+    def __init__(self, params: MpcParams, *, planes_in_one_call: bool = True) -> None:
         self._params = params
+        self._planes_in_one_call = planes_in_one_call
         m = params.horizon_steps + 1
         self._n_steps = m
         self._nu = 3 * m
@@ -575,27 +584,27 @@ class ModelPredictiveController:
         normals_xy = np.asarray(half_planes.normals_xy, dtype=float)
         offsets = np.asarray(half_planes.offsets, dtype=float)
         soft = None if half_planes.soft is None else np.asarray(half_planes.soft)
-        normals_z = half_planes.z_normals
+        normals_z = None if half_planes.normals_z is None else np.asarray(half_planes.normals_z, dtype=float)
         if (
             steps.ndim != 1
             or normals_xy.shape != (count, 2)
             or offsets.shape != (count,)
             or (soft is not None and soft.shape != (count,))
-            or normals_z.shape != (count,)
+            or (normals_z is not None and normals_z.shape != (count,))
         ):
             raise ValueError(
                 "half-planes: steps (R,), normals_xy (R, 2), offsets (R,), soft (R,), normals_z (R,); "
                 f"got {count} steps"
             )
-        if steps.dtype.kind not in "iu" or steps.min() < 1 or steps.max() > self._n_steps:
-            raise ValueError(f"half-plane steps must be integers in 1..{self._n_steps}")
         if soft is not None and soft.dtype != bool:
             raise ValueError(f"half-plane soft must be an array of bool, got {soft.dtype}")
-        normals = np.empty((count, 3))
-        normals[:, :2] = normals_xy
-        normals[:, 2] = normals_z
-        weights = np.ones(count) if soft is None else soft.astype(float)
-        return steps.astype(np.int64, copy=False), normals, offsets, weights
+        steps = steps.astype(np.int64, copy=False) if steps.dtype.kind in "iu" else None
+        normals, weights = np.empty((count, 3)), np.empty(count)
+        if steps is None or not checked_planes(
+            steps, normals_xy, normals_z, soft, self._n_steps, normals, weights
+        ):
+            raise ValueError(f"half-plane steps must be integers in 1..{self._n_steps}")
+        return steps, normals, offsets, weights
 
     def _half_plane_rows(
         self,
@@ -725,9 +734,47 @@ class ModelPredictiveController:
                     verdict, fixed_rows_ok = NEEDS_SOLVER, True
             elif not (np.all(np.isfinite(half_planes[1])) and np.all(np.isfinite(half_planes[2]))):
                 return None
-            if verdict != CLOSED_FORM:
-                extra = self._half_plane_rows_compiled(half_planes, position_m, velocity_mps, f)
         path, iterations, time_s = "closed_form", 0, 0.0
+        solver = qp.compiled_active_set if self._planes_in_one_call else None
+        if half_planes is not None and fixed_rows_ok and solver is not None:
+            # Only the half-planes failed: ExactQp.finish's steps and the rollout in one compiled call.
+            steps, normals, offsets, soft = half_planes
+            count = len(steps)
+            extra_rows, extra_lower = np.zeros((count, self._n_exact)), np.empty(count)
+            found, iterations, violation, shortfall = solve_with_planes(
+                self._input_to_state,
+                self._free_response(np.concatenate([position_m, velocity_mps]), f),
+                steps,
+                normals,
+                offsets,
+                soft,
+                solver,
+                q,
+                lo,
+                hi,
+                z,
+                position_m,
+                velocity_mps,
+                f,
+                self._g,
+                prm.dt_s,
+                box_lo,
+                box_hi,
+                self._state_min_c,
+                self._state_max_c,
+                extra_rows,
+                extra_lower,
+                inputs,
+                positions,
+                velocities,
+            )
+            if found == PLANES_UNSOLVED:  # ExactQp.finish runs the compiled solver again, then DAQP
+                extra = (extra_rows, extra_lower, np.full(count, np.inf))
+            else:
+                verdict = CLOSED_FORM  # the plan is written
+                path = "active_set" if found == PLANES_ACTIVE_SET else "closed_form"
+        elif half_planes is not None and verdict != CLOSED_FORM:
+            extra = self._half_plane_rows_compiled(half_planes, position_m, velocity_mps, f)
         if verdict != CLOSED_FORM:
             result = qp.finish(q, lo, hi, fixed_rows_ok, z, rows, gradient, *extra)
             self._fallbacks += result.fallback

@@ -12,12 +12,18 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from controller.dual_active_set import OPTIMAL, solve_identity_qp
 from controller.qp import closed_form_kernel
 
 # solve_fast's verdicts
 CLOSED_FORM = 0  # the closed form is the optimum; the plan is written
 NEEDS_SOLVER = 1  # a row or a resting gradient fails: q, lo, hi, z, rows, gradient are written for ExactQp
 INVALID = 2  # an argument is not finite or beyond `plausible`: nothing is written
+
+# solve_with_planes' paths
+PLANES_CLOSED_FORM = 0  # the closed form meets every half-plane row after all (to the rows' tolerance)
+PLANES_ACTIVE_SET = 1  # the compiled active set solved the QP with the half-plane rows
+PLANES_UNSOLVED = 2  # it did not end optimal: the caller hands the rows to ExactQp.finish (DAQP decides)
 
 
 @numba.njit(cache=True)
@@ -302,6 +308,29 @@ def half_plane_rows(
 
 
 @numba.njit(cache=True)
+def checked_planes(
+    steps: np.ndarray,
+    normals_xy: np.ndarray,
+    normals_z: np.ndarray | None,
+    soft: np.ndarray | None,
+    last_step: int,
+    normals: np.ndarray,
+    weights: np.ndarray,
+) -> bool:  # pragma: no cover - compiled; tested through ModelPredictiveController.solve
+    """Whether every step (R,) lies in 1..last_step; and write normals (R, 3) from normals_xy (R, 2) and
+    normals_z (R,) (None: 0) and weights (R,) 1.0 / 0.0 from soft (R,) bool (None: all 1.0), in one pass over
+    the rows instead of half a dozen numpy calls (mpc.py `_checked_half_planes` checks the shapes)."""
+    for r in range(steps.shape[0]):
+        if not 1 <= steps[r] <= last_step:
+            return False
+        normals[r, 0] = normals_xy[r, 0]
+        normals[r, 1] = normals_xy[r, 1]
+        normals[r, 2] = 0.0 if normals_z is None else normals_z[r]
+        weights[r] = 1.0 if soft is None or soft[r] else 0.0
+    return True
+
+
+@numba.njit(cache=True)
 def plane_shortfall(
     steps: np.ndarray, normals: np.ndarray, offsets: np.ndarray, positions: np.ndarray
 ) -> float:  # pragma: no cover - compiled; tested against the numpy form in tests/controller/test_mpc.py
@@ -317,3 +346,102 @@ def plane_shortfall(
             return np.nan
         worst = max(worst, b - ((ax * p[0] + ay * p[1]) + az * p[2]))
     return worst
+
+
+@numba.njit(cache=True)
+def solve_with_planes(
+    input_to_state,
+    free,
+    steps,
+    normals,
+    offsets,
+    soft,
+    active_set,
+    q,
+    lo,
+    hi,
+    z,
+    position,
+    velocity,
+    f,
+    gravity,
+    dt,
+    box_lo,
+    box_hi,
+    state_min,
+    state_max,
+    extra,
+    lower,
+    inputs,
+    positions,
+    velocities,
+):  # pragma: no cover - compiled; tested against ExactQp.finish's path through ModelPredictiveController
+    """ExactQp.finish, steps 1 to 3, for the solve where only half-plane rows failed the closed form z (n,)
+    (its fixed rows all held): write the rows into extra (R, n), zero beyond the inputs and slacks, and
+    their bounds into lower (R,) (`half_plane_rows`, free (6(N+1),) the free response); keep z when no row
+    misses by more than the rows' tolerance, else solve the whole problem by the compiled active set
+    (active_set = ExactQp.compiled_active_set); roll the plan out (`rollout`). Returns (path, iterations,
+    largest state-bound excursion, largest half-plane shortfall); PLANES_UNSOLVED writes no plan.
+
+    The same decisions and the same bits as mpc.py's path through ExactQp.finish, with one difference: the
+    rows' values at z, which decide only whether z stands, are summed here in order, there by BLAS."""
+    half_plane_rows(input_to_state, free, steps, normals, offsets, soft, extra, lower)
+    w_upper, a_ptr, a_idx, a_val, start_rows, start_vars, tol, limit = active_set
+    n = z.shape[0]
+    count = steps.shape[0]
+    missed = False
+    for r in range(count):
+        value = 0.0
+        for j in range(n):
+            value += extra[r, j] * z[j]
+        if value < lower[r] - tol:
+            missed = True
+            break
+    path, iterations = PLANES_CLOSED_FORM, 0
+    x = z
+    if missed:
+        m0 = lo.shape[0]
+        lo_all = np.empty(m0 + count)
+        hi_all = np.empty(m0 + count)
+        lo_all[:m0], hi_all[:m0] = lo, hi
+        lo_all[m0:], hi_all[m0:] = lower, np.inf
+        x = np.empty(n)
+        multipliers = np.empty(n + 1)
+        active = np.empty(n + 1, dtype=np.int64)
+        flag, _, iterations = solve_identity_qp(
+            w_upper,
+            q,
+            a_ptr,
+            a_idx,
+            a_val,
+            extra,
+            lo_all,
+            hi_all,
+            start_rows,
+            start_vars,
+            tol,
+            limit,
+            x,
+            multipliers,
+            active,
+        )
+        if flag != OPTIMAL:
+            return PLANES_UNSOLVED, iterations, 0.0, 0.0
+        path = PLANES_ACTIVE_SET
+    m = f.shape[0]
+    violation = rollout(
+        position,
+        velocity,
+        x[: 3 * m].reshape((m, 3)),
+        f,
+        gravity,
+        dt,
+        box_lo,
+        box_hi,
+        state_min,
+        state_max,
+        inputs,
+        positions,
+        velocities,
+    )
+    return path, iterations, violation, plane_shortfall(steps, normals, offsets, positions)

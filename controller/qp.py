@@ -69,6 +69,9 @@ STATUSES = ("solved", "infeasible", "failed")
 PATHS = ("closed_form", "blocks", "active_set")
 
 Csr = tuple[np.ndarray, np.ndarray, np.ndarray]  # (indptr, indices, values) of a sparse matrix, row by row
+# solve_identity_qp's problem data: W (n, n) upper triangular, the fixed rows' CSR, start rows (s,), start
+# variables (s,), the feasibility tolerance, the iteration limit (ExactQp.compiled_active_set)
+CompiledActiveSet = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, int]
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,6 +297,24 @@ class ExactQp:
         return (self._gain_csr, self._a_csr, self._rest_idx, self._p_rest_csr, self._tol, self._opt_tol)
 
     @property
+    def compiled_active_set(self) -> CompiledActiveSet | None:
+        """The arguments of `solve_identity_qp` that belong to this problem (W upper triangular, the fixed
+        rows as CSR, the start rows and variables, the feasibility tolerance, the iteration limit), None when
+        step 3 is DAQP's: for callers that run step 3 inside their own compiled code
+        (mpc_kernels.solve_with_planes)."""
+        if not self._compiled:
+            return None
+        assert self._w_upper is not None
+        return (
+            self._w_upper,
+            *self._a_csr,
+            self._start_rows,
+            self._start_vars,
+            self._tol,
+            self._iteration_limit,
+        )
+
+    @property
     def row_count(self) -> int:
         return self._a.shape[0]
 
@@ -430,21 +451,25 @@ class ExactQp:
     ) -> QpResult | None:
         """Step 3 by `solve_identity_qp` on every row; None (DAQP's path then runs) unless it ends
         optimal, so an infeasible verdict or the iteration limit is always confirmed by DAQP."""
-        assert self._w_upper is not None
+        solver = self.compiled_active_set
+        assert solver is not None
+        w_upper, a_ptr, a_idx, a_val, start_rows, start_vars, tol, limit = solver
         x = np.empty(self.n)
         multipliers = np.empty(self.n + 1)
         active = np.empty(self.n + 1, dtype=np.int64)
         flag, _, its = solve_identity_qp(
-            self._w_upper,
+            w_upper,
             q,
-            *self._a_csr,
+            a_ptr,
+            a_idx,
+            a_val,
             np.ascontiguousarray(extra_a, dtype=float),
             np.concatenate([lo, extra_lo]),
             np.concatenate([hi, extra_hi]),
-            self._start_rows,
-            self._start_vars,
-            self._tol,
-            self._iteration_limit,
+            start_rows,
+            start_vars,
+            tol,
+            limit,
             x,
             multipliers,
             active,

@@ -574,12 +574,41 @@ def test_the_rows_of_one_step_give_way_evenly():
     assert sol.positions_m[5, 0] == pytest.approx(x, abs=1e-3)
 
 
-def test_half_plane_step_outside_the_horizon_raises():
-    planes = HalfPlanes(steps=np.array([0]), normals_xy=np.array([[1.0, 0.0]]), offsets=np.array([0.0]))
+@pytest.mark.parametrize(
+    "steps", [np.array([0]), np.array([17]), np.array([3, -1]), np.array([2.0]), np.array([2], np.uint8) - 3]
+)
+def test_half_plane_step_outside_the_horizon_raises(steps):
+    """Steps must be integers in 1..N+1 (N + 1 = 16): 0, N+2, a negative one, a float and a wrapped uint8
+    (255) are refused before any row is built."""
+    planes = HalfPlanes(
+        steps=steps, normals_xy=np.tile([1.0, 0.0], (len(steps), 1)), offsets=np.zeros(len(steps))
+    )
     with pytest.raises(ValueError, match="steps"):
         ModelPredictiveController(MpcParams()).solve(
             **flight_case(np.random.default_rng(6)), half_planes=planes
         )
+
+
+def test_half_planes_without_z_normals_or_soft_are_vertical_and_soft():
+    """normals_z None means vertical planes (0) and soft None every row soft (weight 1): the same solve as
+    with them written out."""
+    rng = np.random.default_rng(61)
+    case = flight_case(rng)
+    controller = ModelPredictiveController(MpcParams())
+    planes = _cut(rng, controller.solve(**case).positions_m, 4, 0.2)
+    written = HalfPlanes(
+        steps=planes.steps.astype(np.int32),
+        normals_xy=planes.normals_xy,
+        offsets=planes.offsets,
+        soft=np.ones(4, dtype=bool),
+        normals_z=np.zeros(4),
+    )
+    implicit, explicit = (
+        controller.solve(**case, half_planes=planes),
+        controller.solve(**case, half_planes=written),
+    )
+    assert implicit.path == explicit.path == "active_set"
+    np.testing.assert_array_equal(implicit.inputs_mps2, explicit.inputs_mps2)
 
 
 def test_a_row_the_first_working_set_leaves_out_joins_when_the_answer_misses_it():
@@ -598,3 +627,36 @@ def test_a_row_the_first_working_set_leaves_out_joins_when_the_answer_misses_it(
     )
     assert result.status == "solved" and result.path == "active_set"
     np.testing.assert_allclose(result.x, [5.0, 0.0], atol=1e-9)
+
+
+def test_half_planes_in_one_compiled_call_are_finishs_answer_to_the_bit():
+    """mpc_kernels.solve_with_planes (the default with the compiled active set) against the same solve through
+    ExactQp.finish on 200 flight-like instances with separation-shaped planes (soft, random turns and tilts)
+    or random cuts: the same path, iterations, plan and violations, to the bit. Both controllers solve the
+    same sequence (the free plan first): step 2's DAQP blocks keep their workspaces from solve to solve."""
+    rng = np.random.default_rng(2026_12_07)
+    fused = ModelPredictiveController(MpcParams(active_set="compiled"))
+    through_finish = ModelPredictiveController(MpcParams(active_set="compiled"), planes_in_one_call=False)
+    paths = []
+    for i in range(200):
+        case = flight_case(rng)
+        free = fused.solve(**case).positions_m
+        through_finish.solve(**case)
+        if i % 2:
+            planes = _separation_planes(free, rng.uniform(-0.6, 0.6), True, rng.choice([0.0, 0.5]))
+        else:
+            planes = _cut(rng, free, int(rng.integers(1, 6)), float(rng.uniform(0.01, 0.5)))
+        one, two = fused.solve(**case, half_planes=planes), through_finish.solve(**case, half_planes=planes)
+        assert (one.ok, one.path, one.iterations) == (two.ok, two.path, two.iterations)
+        for a, b in (
+            (one.inputs_mps2, two.inputs_mps2),
+            (one.positions_m, two.positions_m),
+            (one.velocities_mps, two.velocities_mps),
+        ):
+            np.testing.assert_array_equal(a, b)
+        assert (one.max_state_violation, one.half_plane_violation_m) == (
+            two.max_state_violation,
+            two.half_plane_violation_m,
+        )
+        paths.append(one.path)
+    assert paths.count("active_set") >= 150

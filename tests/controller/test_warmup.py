@@ -13,6 +13,8 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         mpc_kernels.solve_fast,
         mpc_kernels.rollout,
         mpc_kernels.half_plane_rows,
+        mpc_kernels.solve_with_planes,
+        mpc_kernels.checked_planes,
         teammates.align_rows,
         tracker._predicted,
         tracker._gate_distance_sq,
