@@ -11,7 +11,6 @@ tests/controller/test_fields_kernel.py checks them on recorded flights. Compiled
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numba
 import numpy as np
@@ -50,8 +49,24 @@ TERMS = ("total", "tracking", "teammates", "obstacles", "person", "approach")
 ) = range(23)
 
 
-@lru_cache(maxsize=16)
+# The parameter vectors made so far, by the id of their FieldParams (kept here, so the id stays theirs).
+_PARAM_VECTORS: dict[int, tuple[FieldParams, np.ndarray]] = {}
+
+
 def _param_vector(params: FieldParams) -> np.ndarray:
+    """(23,) the kernel's parameters (indices P_*), made once per FieldParams object: a controller hands the
+    same object every tick, and looking it up by value (functools.lru_cache) hashes its 30 fields, 2 us."""
+    made = _PARAM_VECTORS.get(id(params))
+    if made is not None and made[0] is params:
+        return made[1]
+    if len(_PARAM_VECTORS) >= 16:
+        _PARAM_VECTORS.clear()
+    vector = _params_as_vector(params)
+    _PARAM_VECTORS[id(params)] = (params, vector)
+    return vector
+
+
+def _params_as_vector(params: FieldParams) -> np.ndarray:
     p = params
     return np.array(
         [

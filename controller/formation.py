@@ -31,7 +31,6 @@ from controller.fields import (
     ObstacleSet,
     TeammatePaths,
     covariance_radius_m,
-    teammate_age_term_m,
     teammate_paths,
 )
 from controller.fields_kernel import external_inputs_compiled
@@ -62,11 +61,11 @@ from controller.reference import (
 )
 from controller.separation import (
     SeparationRows,
-    age_margin_m,
     held_rows,
     imminent_miss_m,
     separation_rows,
 )
+from controller.separation_kernel import row_inflation
 from controller.teammates import TeammateView, align_rows
 
 DEFAULT_COV_M2 = np.eye(3) * 0.25
@@ -496,14 +495,22 @@ class FormationController:
         measured = np.asarray(own.position_m, dtype=float)
         lag = measured - tick.start_p if _sane(measured) else np.zeros(3)
         ages = mates.ages
-        speed_term = teammate_age_term_m(ages, prm.fields)
-        radii = mates.d_max_m - prm.fields.teammate_d_max_base_m - speed_term  # both r_sigma (eq. 15)
+        inflation = np.empty(mates.count)  # both r_sigma (eq. 15) and the age margin, in one compiled pass
+        row_inflation(
+            mates.d_max_m,
+            ages,
+            prm.fields.teammate_d_max_base_m,
+            prm.fields.teammate_speed_mps,
+            prm.fields.teammate_age_grace_s,
+            0.5 * prm.separation.plan_deviation_mps2,
+            inflation,
+        )
         return separation_rows(
             own_path_m=own_path,
             own_velocities_mps=own_vel,
             mates=mates.placed_by(own.gps_offset_m),
             mate_ages_s=ages,
-            inflation_m=radii + age_margin_m(ages, speed_term_m=speed_term, params=prm.separation),
+            inflation_m=inflation,
             obstacles=obstacle_set,
             own_cov_radius_m=self._row_cov_radius(own),
             dt_s=self._mpc_params.dt_s,

@@ -22,6 +22,26 @@ def _room(closing: float, decel: float, cap: float) -> float:
 
 
 @numba.njit(cache=True)
+def row_inflation(
+    d_max, ages, d_max_base, speed, grace, half_deviation, out
+):  # pragma: no cover - compiled; tested against the numpy form in tests/controller/test_separation_kernel.py
+    """out (J,) = what each teammate's rows grow by: both covariance radii, d_max - d_max_base - r_comm
+    (eq. 15, fields.teammate_age_term_m's r_comm = speed * max(age - grace, 0)), plus the age margin
+    min(r_comm, half_deviation * age^2) (separation.age_margin_m); d_max, ages (J,). numpy's operations in
+    numpy's order, its minimum and maximum included (NaN kept, the second operand on a tie): the same bits
+    as formation.py computed them with numpy."""
+    for j in range(d_max.shape[0]):
+        age = ages[j]
+        late = age - grace
+        late = late if (late > 0.0 or late != late) else 0.0
+        r_comm = speed * late
+        radii = (d_max[j] - d_max_base) - r_comm
+        held = age if (age > 0.0 or age != age) else 0.0
+        drift = (half_deviation * held) * held
+        out[j] = radii + (r_comm if (r_comm < drift or r_comm != r_comm) else drift)
+
+
+@numba.njit(cache=True)
 def teammate_rows_kernel(
     own_path,  # (S, 3)
     own_vel,  # (S, 3)

@@ -21,7 +21,6 @@ from controller.fields import (
     FieldParams,
     TeammatePaths,
     covariance_radius_m,
-    teammate_age_term_m,
     teammate_paths,
 )
 from controller.messages import HorizonPlan
@@ -53,6 +52,52 @@ def align_rows(
                 a = k - lo
             for c in range(3):
                 out[i, n, c] = (1.0 - a) * positions[r, lo, c] + a * positions[r, hi, c]
+
+
+@numba.njit(cache=True)
+def fresh_paths(
+    positions,
+    lengths,
+    stamps,
+    plan_dts,
+    radii,
+    row_ids,
+    in_formation,
+    offsets,
+    rows,
+    now_s,
+    dt_s,
+    current_only,
+    radius_cap,
+    d_max_head,
+    speed,
+    grace,
+    out,
+    ids_out,
+    in_formation_out,
+    offsets_out,
+    d_max_out,
+    ages_out,
+):  # pragma: no cover - compiled; tested against the numpy form in tests/controller/test_teammates.py
+    """Everything `TeammateTable.paths` gives for the table's rows `rows` (R,), in one call: their plans
+    aligned to our horizon into out (R, steps, 3) (`align_rows`), their ids, in-formation flags and GPS
+    offsets, eq. 15's d_max = (d_max_head + min(r_j, radius_cap)) + speed * max(age - grace, 0) with
+    d_max_head = base + our own capped radius, and the ages max(now - stamp, 0). numpy's operations in numpy's
+    order, its minimum and maximum included (NaN kept, the second operand on a tie): the same bits."""
+    align_rows(positions, lengths, stamps, plan_dts, rows, now_s, dt_s, current_only, out)
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        ids_out[i] = row_ids[r]
+        in_formation_out[i] = in_formation[r]
+        for c in range(3):
+            offsets_out[i, c] = offsets[r, c]
+        radius = radii[r]
+        radius = radius if (radius < radius_cap or radius != radius) else radius_cap
+        age = now_s - stamps[r]
+        late = age - grace
+        late = late if (late > 0.0 or late != late) else 0.0
+        d_max_out[i] = (d_max_head + radius) + speed * late
+        ages_out[i] = age if (age > 0.0 or age != age) else 0.0
 
 
 @numba.njit(cache=True)
@@ -247,30 +292,36 @@ class TeammateTable:
         their eq. 15 d_max (as fields.teammate_paths), then the extra plans (through teammate_paths)."""
         n = self._count
         rows = (self._stamps[:n] >= since_s).nonzero()[0]  # np.flatnonzero without its Python wrapper
-        out = np.empty((rows.shape[0], steps, 3))
-        align_rows(
+        count = rows.shape[0]
+        out = np.empty((count, steps, 3))
+        ids, flying, offsets = np.empty(count, np.int64), np.empty(count, np.bool_), np.empty((count, 3))
+        d_max, ages = np.empty(count), np.empty(count)
+        cap = params.covariance_radius_cap_m
+        fresh_paths(
             self._positions,
             self._lengths,
             self._stamps,
             self._dts,
+            self._radii,
+            self._row_ids,
+            self._in_formation,
+            self._offsets,
             rows,
-            now_s,
-            dt_s,
+            float(now_s),
+            float(dt_s),
             current_position_only,
+            cap,
+            params.teammate_d_max_base_m + min(own_cov_radius_m, cap),
+            params.teammate_speed_mps,
+            params.teammate_age_grace_s,
             out,
+            ids,
+            flying,
+            offsets,
+            d_max,
+            ages,
         )
-        cap = params.covariance_radius_cap_m
-        radii = np.minimum(self._radii[rows], cap)
-        since_stamp = now_s - self._stamps[rows]  # the plans' ages, negative for one stamped after now_s
-        d_max = (
-            params.teammate_d_max_base_m
-            + min(own_cov_radius_m, cap)
-            + radii
-            + teammate_age_term_m(since_stamp, params)
-        )
-        ages = np.maximum(since_stamp, 0.0)
-        offsets = self._offsets[rows]
-        mates = TeammatePaths(out, self._row_ids[rows], self._in_formation[rows], d_max, 0, ages, offsets)
+        mates = TeammatePaths(out, ids, flying, d_max, 0, ages, offsets)
         if not extra:
             return mates
         more = teammate_paths(

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import controller.formation as formation
-from controller.fields import external_inputs
-from controller.fields_kernel import TERMS, external_inputs_compiled
+from controller.fields import FieldParams, external_inputs
+from controller.fields_kernel import P_GAIN, P_OBSTACLE_PEAK, TERMS, _param_vector, external_inputs_compiled
 from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
 
@@ -83,3 +83,17 @@ def test_non_finite_total_is_a_fault_with_zero_inputs(recorded):
     ref, fast = external_inputs(**kwargs), external_inputs_compiled(**kwargs)
     assert ref.fault and fast.fault
     np.testing.assert_array_equal(fast.total, 0.0)
+
+
+def test_the_parameter_vector_is_made_once_per_params_object_and_carries_its_values():
+    """The kernel's parameters are remembered by FieldParams object (not by value): the same object gives
+    the same array, another object its own values, even after 20 others have pushed the first one out."""
+    base = FieldParams()
+    first = _param_vector(base)
+    assert _param_vector(base) is first
+    others = [FieldParams(gain=1.0 + i, obstacle_peak_mps2=3.0 + i) for i in range(20)]
+    for i, params in enumerate(others):
+        vector = _param_vector(params)
+        assert (vector[P_GAIN], vector[P_OBSTACLE_PEAK]) == (1.0 + i, 3.0 + i)
+    again = _param_vector(base)
+    assert (again[P_GAIN], again[P_OBSTACLE_PEAK]) == (base.gain, base.obstacle_peak_mps2)

@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.fields import ObstacleSet, TeammatePaths
+from controller.fields import FieldParams, ObstacleSet, TeammatePaths, teammate_age_term_m
 from controller.messages import Obstacle
-from controller.separation import SeparationParams, separation_rows
+from controller.separation import SeparationParams, age_margin_m, separation_rows
+from controller.separation_kernel import row_inflation
 
 STEPS = 16
 DT = 0.1
@@ -91,3 +92,37 @@ def test_the_random_ticks_exercise_every_kind_of_row(pairs):
     assert sum(ref.obstacle_rows for _, ref in pairs) > 50_000  # 72,406
     assert sum(ref.floor_rows for _, ref in pairs) > 2_000  # 5,049
     assert sum(ref.count == 0 for _, ref in pairs) >= 5  # 7
+
+
+def test_row_inflation_is_the_numpy_forms_to_the_bit():
+    """separation_kernel.row_inflation against the numpy form it replaces in formation.py (d_max less the
+    base and r_comm, plus age_margin_m) on 200 random teams: ages of 0, within and on the edge of the grace
+    period and far beyond it, d_max from 0 to 20 m, and NaN in both; the same bits, zeros' signs included."""
+    rng = np.random.default_rng(2026_12_07)
+    fields, sep = FieldParams(), SeparationParams()
+    grace = fields.teammate_age_grace_s
+    for _ in range(200):
+        count = int(rng.integers(0, 17))
+        ages = rng.choice([0.0, 0.05, grace, grace + 1e-9, 0.7, 3.0, 40.0], count) * rng.uniform(
+            0.5, 1.5, count
+        )
+        ages[rng.random(count) < 0.2] = grace
+        ages[rng.random(count) < 0.05] = np.nan
+        d_max = rng.uniform(0.0, 20.0, count)
+        d_max[rng.random(count) < 0.05] = np.nan
+        got = np.empty(count)
+        row_inflation(
+            d_max,
+            ages,
+            fields.teammate_d_max_base_m,
+            fields.teammate_speed_mps,
+            grace,
+            0.5 * sep.plan_deviation_mps2,
+            got,
+        )
+        speed_term = teammate_age_term_m(ages, fields)
+        want = (d_max - fields.teammate_d_max_base_m - speed_term) + age_margin_m(
+            ages, speed_term_m=speed_term, params=sep
+        )
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(np.signbit(got), np.signbit(want))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from controller import dual_active_set, fields_kernel, mpc_kernels, teammates, tracker
+from controller import dual_active_set, fields_kernel, mpc_kernels, separation_kernel, teammates, tracker
 from controller.warmup import warm_up
 
 
@@ -16,6 +16,8 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         mpc_kernels.solve_with_planes,
         mpc_kernels.checked_planes,
         teammates.align_rows,
+        teammates.fresh_paths,
+        separation_kernel.row_inflation,
         tracker._predicted,
         tracker._gate_distance_sq,
         dual_active_set.solve_identity_qp,
