@@ -47,7 +47,7 @@ from controller.mpc_kernels import (
     checked_planes,
     half_plane_rows,
     plane_shortfall,
-    rollout,
+    roll_out_variables,
     solve_fast,
     solve_with_planes,
 )
@@ -784,10 +784,10 @@ class ModelPredictiveController:
                     result.status, message, result.iterations, result.solve_time_s, path=result.path
                 )
             path, iterations, time_s = result.path, result.iterations, result.solve_time_s
-            violation = rollout(
+            violation = roll_out_variables(
+                result.x,
                 position_m,
                 velocity_mps,
-                result.x[: self._nu].reshape(n, 3),
                 f,
                 self._g,
                 prm.dt_s,

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from controller.dual_active_set import OPTIMAL, solve_identity_qp
-from controller.qp import closed_form_kernel
+from controller.dual_active_set import OPTIMAL
+from controller.qp import closed_form_kernel, compiled_step_3
 
 # solve_fast's verdicts
 CLOSED_FORM = 0  # the closed form is the optimum; the plan is written
@@ -182,6 +182,30 @@ def rollout(
 
 
 @numba.njit(cache=True)
+def roll_out_variables(
+    z, position, velocity, f, gravity, dt, box_lo, box_hi, state_min, state_max, inputs, positions, velocities
+):  # pragma: no cover - compiled; tested through ModelPredictiveController
+    """`rollout` of the inputs among the QP's variables z (the first 3(N+1), step by step): the plan of a
+    solution, whichever step found it."""
+    m = f.shape[0]
+    return rollout(
+        position,
+        velocity,
+        z[: 3 * m].reshape((m, 3)),
+        f,
+        gravity,
+        dt,
+        box_lo,
+        box_hi,
+        state_min,
+        state_max,
+        inputs,
+        positions,
+        velocities,
+    )
+
+
+@numba.njit(cache=True)
 def solve_fast(
     free_x0,
     input_to_state,
@@ -259,11 +283,10 @@ def solve_fast(
     gain, a, rest_idx, p_rest, tol, opt_tol = qp_data
     if not closed_form_kernel(gain, a, rest_idx, p_rest, tol, opt_tol, q, lo, hi, z, rows, gradient):
         return NEEDS_SOLVER, 0.0
-    m = f.shape[0]
-    violation = rollout(
+    violation = roll_out_variables(
+        z,
         position,
         velocity,
-        z[: 3 * m].reshape((m, 3)),
         f,
         gravity,
         dt,
@@ -386,7 +409,7 @@ def solve_with_planes(
     The same decisions and the same bits as mpc.py's path through ExactQp.finish, with one difference: the
     rows' values at z, which decide only whether z stands, are summed here in order, there by BLAS."""
     half_plane_rows(input_to_state, free, steps, normals, offsets, soft, extra, lower)
-    w_upper, a_ptr, a_idx, a_val, start_rows, start_vars, tol, limit = active_set
+    tol = active_set[6]
     n = z.shape[0]
     count = steps.shape[0]
     missed = False
@@ -405,34 +428,14 @@ def solve_with_planes(
         hi_all = np.empty(m0 + count)
         lo_all[:m0], hi_all[:m0] = lo, hi
         lo_all[m0:], hi_all[m0:] = lower, np.inf
-        x = np.empty(n)
-        multipliers = np.empty(n + 1)
-        active = np.empty(n + 1, dtype=np.int64)
-        flag, _, iterations = solve_identity_qp(
-            w_upper,
-            q,
-            a_ptr,
-            a_idx,
-            a_val,
-            extra,
-            lo_all,
-            hi_all,
-            start_rows,
-            start_vars,
-            tol,
-            limit,
-            x,
-            multipliers,
-            active,
-        )
+        flag, iterations, x = compiled_step_3(active_set, q, extra, lo_all, hi_all)
         if flag != OPTIMAL:
             return PLANES_UNSOLVED, iterations, 0.0, 0.0
         path = PLANES_ACTIVE_SET
-    m = f.shape[0]
-    violation = rollout(
+    violation = roll_out_variables(
+        x,
         position,
         velocity,
-        x[: 3 * m].reshape((m, 3)),
         f,
         gravity,
         dt,

@@ -94,6 +94,36 @@ class QpResult:
 
 
 @numba.njit(cache=True)
+def compiled_step_3(active_set, q, extra_a, lo, hi):  # pragma: no cover - compiled
+    """Step 3 by `solve_identity_qp` for q (n,) with the problem's data active_set
+    (`ExactQp.compiled_active_set`), the extra rows extra_a (m1, n) and every row's bounds lo, hi (m0 + m1,).
+    Returns (exit flag, iterations, z (n,)); z is the optimum only when the flag is OPTIMAL."""
+    w_upper, a_ptr, a_idx, a_val, start_rows, start_vars, tol, limit = active_set
+    n = q.shape[0]
+    z = np.empty(n)
+    multipliers = np.empty(n + 1)
+    active = np.empty(n + 1, dtype=np.int64)
+    flag, _, iterations = solve_identity_qp(
+        w_upper,
+        q,
+        a_ptr,
+        a_idx,
+        a_val,
+        extra_a,
+        lo,
+        hi,
+        start_rows,
+        start_vars,
+        tol,
+        limit,
+        z,
+        multipliers,
+        active,
+    )
+    return flag, iterations, z
+
+
+@numba.njit(cache=True)
 def closed_form_kernel(
     gain, a, rest_idx, p_rest, tol, opt_tol, q, lo, hi, z, rows, gradient
 ):  # pragma: no cover
@@ -453,26 +483,12 @@ class ExactQp:
         optimal, so an infeasible verdict or the iteration limit is always confirmed by DAQP."""
         solver = self.compiled_active_set
         assert solver is not None
-        w_upper, a_ptr, a_idx, a_val, start_rows, start_vars, tol, limit = solver
-        x = np.empty(self.n)
-        multipliers = np.empty(self.n + 1)
-        active = np.empty(self.n + 1, dtype=np.int64)
-        flag, _, its = solve_identity_qp(
-            w_upper,
+        flag, its, x = compiled_step_3(
+            solver,
             q,
-            a_ptr,
-            a_idx,
-            a_val,
             np.ascontiguousarray(extra_a, dtype=float),
             np.concatenate([lo, extra_lo]),
             np.concatenate([hi, extra_hi]),
-            start_rows,
-            start_vars,
-            tol,
-            limit,
-            x,
-            multipliers,
-            active,
         )
         if flag != OPTIMAL:
             return None

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from controller import dual_active_set, fields_kernel, mpc_kernels, separation_kernel, teammates, tracker
+from controller import dual_active_set, fields_kernel, mpc_kernels, qp, separation_kernel, teammates, tracker
 from controller.warmup import warm_up
 
 
@@ -15,6 +15,8 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         mpc_kernels.half_plane_rows,
         mpc_kernels.solve_with_planes,
         mpc_kernels.checked_planes,
+        mpc_kernels.roll_out_variables,
+        qp.compiled_step_3,
         teammates.align_rows,
         teammates.fresh_paths,
         separation_kernel.row_inflation,
