@@ -399,12 +399,12 @@ def solve_with_planes(
     positions,
     velocities,
 ):  # pragma: no cover - compiled; tested against ExactQp.finish's path through ModelPredictiveController
-    """ExactQp.finish, steps 1 to 3, for the solve where only half-plane rows failed the closed form z (n,)
-    (its fixed rows all held): write the rows into extra (R, n), zero beyond the inputs and slacks, and
-    their bounds into lower (R,) (`half_plane_rows`, free (6(N+1),) the free response); keep z when no row
-    misses by more than the rows' tolerance, else solve the whole problem by the compiled active set
-    (active_set = ExactQp.compiled_active_set); roll the plan out (`rollout`). Returns (path, iterations,
-    largest state-bound excursion, largest half-plane shortfall); PLANES_UNSOLVED writes no plan.
+    """ExactQp.finish for the solve where only half-plane rows failed the closed form z (n,) (its fixed rows
+    all held, so step 2 has nothing to re-solve): write the rows into extra (R, n), zero beyond the inputs
+    and slacks, and their bounds into lower (R,) (`half_plane_rows`, free (6(N+1),) the free response); keep
+    z when no row misses by more than the rows' tolerance, else solve the whole problem by the compiled
+    active set (active_set = ExactQp.compiled_active_set); roll the plan out (`rollout`). Returns (path,
+    iterations, largest state-bound excursion, largest half-plane shortfall); PLANES_UNSOLVED writes no plan.
 
     The same decisions and the same bits as mpc.py's path through ExactQp.finish, with one difference: the
     rows' values at z, which decide only whether z stands, are summed here in order, there by BLAS."""

@@ -311,6 +311,17 @@ class ExactQp:
         starts = self._separable_rest[self._rest_row_var]
         self._start_rows = self._rest_rows[starts].astype(np.int64)
         self._start_vars = self._rest_row_var[starts].astype(np.int64)
+        self._active_set_data: CompiledActiveSet | None = None
+        if self._compiled:
+            assert self._w_upper is not None
+            self._active_set_data = (
+                self._w_upper,
+                *self._a_csr,
+                self._start_rows,
+                self._start_vars,
+                self._tol,
+                self._iteration_limit,
+            )
 
     @property
     def block_count(self) -> int:
@@ -332,17 +343,7 @@ class ExactQp:
         rows as CSR, the start rows and variables, the feasibility tolerance, the iteration limit), None when
         step 3 is DAQP's: for callers that run step 3 inside their own compiled code
         (mpc_kernels.solve_with_planes)."""
-        if not self._compiled:
-            return None
-        assert self._w_upper is not None
-        return (
-            self._w_upper,
-            *self._a_csr,
-            self._start_rows,
-            self._start_vars,
-            self._tol,
-            self._iteration_limit,
-        )
+        return self._active_set_data
 
     @property
     def row_count(self) -> int:
