@@ -16,7 +16,7 @@ FOOTAGE := /usr/share/doc/opencv-doc/examples/data/vtest.avi
 # again: each pytest process spent 5.5 s of its 11.5 s collection rewriting them (docs/fast-core.md).
 export PYTHONDONTWRITEBYTECODE :=
 
-.PHONY: run test test-px4 check bench lint chromium footage pose-env environments clean kernels
+.PHONY: run test test-px4 check bench lint chromium footage pose-env environments clean kernels kernels-fresh
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -51,6 +51,13 @@ run: $(STAMP)
 # The controller's numba kernels are compiled (first run after an install) or loaded once before the tests,
 # so that no timed test pays for the compile (docs/fast-core.md).
 kernels: $(STAMP)
+	$(PY) -c "from controller.warmup import warm_up; warm_up()"
+
+# numba checks a kernel's cache against the kernel's own module only, not against the kernels it calls in
+# other modules (qp, sparse_rows, dual_active_set, scalar_kernels): after editing one of those, the callers'
+# cached code is stale until it is compiled again. This drops every cached kernel and compiles them afresh.
+kernels-fresh: $(STAMP)
+	find controller -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(PY) -c "from controller.warmup import warm_up; warm_up()"
 
 # Two xdist workers more than there are cores: many tests wait on real-time peers (PX4 test peers, browsers,

@@ -14,6 +14,8 @@ import math
 import numba
 import numpy as np
 
+from controller.scalar_kernels import age_term_m, maximum, minimum
+
 
 @numba.njit(cache=True)
 def _room(closing: float, decel: float, cap: float) -> float:
@@ -28,17 +30,12 @@ def row_inflation(
     """out (J,) = what each teammate's rows grow by: both covariance radii, d_max - d_max_base - r_comm
     (eq. 15, fields.teammate_age_term_m's r_comm = speed * max(age - grace, 0)), plus the age margin
     min(r_comm, half_deviation * age^2) (separation.age_margin_m); d_max, ages (J,). numpy's operations in
-    numpy's order, its minimum and maximum included (NaN kept, the second operand on a tie): the same bits
-    as formation.py computed them with numpy."""
+    numpy's order, its minimum and maximum included (`scalar_kernels`): the same bits as formation.py
+    computed them with numpy."""
     for j in range(d_max.shape[0]):
-        age = ages[j]
-        late = age - grace
-        late = late if (late > 0.0 or late != late) else 0.0
-        r_comm = speed * late
-        radii = (d_max[j] - d_max_base) - r_comm
-        held = age if (age > 0.0 or age != age) else 0.0
-        drift = (half_deviation * held) * held
-        out[j] = radii + (r_comm if (r_comm < drift or r_comm != r_comm) else drift)
+        r_comm = age_term_m(ages[j], speed, grace)
+        held = maximum(ages[j], 0.0)
+        out[j] = ((d_max[j] - d_max_base) - r_comm) + minimum(r_comm, (half_deviation * held) * held)
 
 
 @numba.njit(cache=True)

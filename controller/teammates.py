@@ -24,6 +24,7 @@ from controller.fields import (
     teammate_paths,
 )
 from controller.messages import HorizonPlan
+from controller.scalar_kernels import age_term_m, maximum, minimum
 
 
 @numba.njit(cache=True)
@@ -83,7 +84,7 @@ def fresh_paths(
     aligned to our horizon into out (R, steps, 3) (`align_rows`), their ids, in-formation flags and GPS
     offsets, eq. 15's d_max = (d_max_head + min(r_j, radius_cap)) + speed * max(age - grace, 0) with
     d_max_head = base + our own capped radius, and the ages max(now - stamp, 0). numpy's operations in numpy's
-    order, its minimum and maximum included (NaN kept, the second operand on a tie): the same bits."""
+    order, its minimum and maximum included (`scalar_kernels`): the same bits."""
     align_rows(positions, lengths, stamps, plan_dts, rows, now_s, dt_s, current_only, out)
     for i in range(rows.shape[0]):
         r = rows[i]
@@ -91,13 +92,9 @@ def fresh_paths(
         in_formation_out[i] = in_formation[r]
         for c in range(3):
             offsets_out[i, c] = offsets[r, c]
-        radius = radii[r]
-        radius = radius if (radius < radius_cap or radius != radius) else radius_cap
         age = now_s - stamps[r]
-        late = age - grace
-        late = late if (late > 0.0 or late != late) else 0.0
-        d_max_out[i] = (d_max_head + radius) + speed * late
-        ages_out[i] = age if (age > 0.0 or age != age) else 0.0
+        d_max_out[i] = (d_max_head + minimum(radii[r], radius_cap)) + age_term_m(age, speed, grace)
+        ages_out[i] = maximum(age, 0.0)
 
 
 @numba.njit(cache=True)
