@@ -25,6 +25,7 @@ from webui.early_input import EarlyInput
 from webui.panels import CONTROL_PANEL_WIDTH_PX, OperatorPanel
 from webui.scene import SceneRenderer
 from webui.view import OperatorActions, SceneView
+from webui.wakeup import wake_safely
 
 TICKET_HEADER = "X-Skyring-Ticket"
 """The header on a forwarded viser connection that names the signed-in browser behind it."""
@@ -78,6 +79,7 @@ class OperatorUi:
             self.server = viser.ViserServer(
                 host=host, port=port, label="skyring ground station", verbose=False
             )
+        wake_safely(self.server)  # before any page connects: see webui.wakeup
         self.server.gui.configure_theme(
             control_width="large", show_share_button=False, show_logo=False, dark_mode=False
         )

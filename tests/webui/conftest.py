@@ -23,10 +23,13 @@ if TYPE_CHECKING:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item, call):
     """A failing browser test's report ends with the newest console lines of the pages it (or its module)
-    opened: an intermittent failure on CI is only ever seen there."""
+    opened, and where the stations' updates stand on their way to the open pages: an intermittent failure on
+    CI is only ever seen there."""
     report = yield
     if report.failed and "live_harness" in sys.modules:
-        report.sections.append(("browser console", sys.modules["live_harness"].recent_console()))
+        harness = sys.modules["live_harness"]
+        report.sections.append(("browser console", harness.recent_console()))
+        report.sections.append(("viser delivery", harness.delivery_report()))
     return report
 
 

@@ -7,6 +7,7 @@ import asyncio
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -156,7 +157,11 @@ def start_live(
         loop.call_soon_threadsafe(stop_event.set)
 
     live = Live(station=station, urls=urls, ui=box["ui"], stop=stop, setup=setup, speed=speed)
+    STARTED.append(live)
     return live, thread
+
+
+STARTED: deque[Live] = deque(maxlen=2)  # the ground stations this process started last, for `delivery_report`
 
 
 @dataclass
@@ -190,6 +195,52 @@ def recent_console(pages: int = 4, lines: int = 40) -> str:
     for n, opened in list(enumerate(OPENED, 1))[-pages:]:
         kept = [line for line in opened.console if "GL Driver Message" not in line][-lines:]
         parts.append(f"page {n} ({'closed' if opened.page.is_closed() else 'open'}):\n" + "\n".join(kept))
+    return "\n".join(parts)
+
+
+PAGE_STATE_JS = """
+() => new Promise(resolve => {
+  const mutable = window.__viserMutable;
+  let frames = 0;
+  const count = () => { frames += 1; requestAnimationFrame(count); };
+  requestAnimationFrame(count);
+  setTimeout(() => resolve({
+    queued: mutable ? mutable.messageQueue.length : 'no viewer',
+    render: mutable ? mutable.getRenderRequestState : 'no viewer',
+    drain: mutable ? mutable.drainMessageQueue !== null : 'no viewer',
+    hidden: document.hidden,
+    framesIn1s: frames,
+  }), 1000);
+})
+"""
+
+
+def delivery_report() -> str:
+    """Where the station's updates stand on their way to each open page, for a failing test's report: per
+    station, viser's broadcast buffer (messages pushed, atomic blocks open) and how far each client's sender
+    has got; per open page, what waits in viser's queue, its render state and how many animation frames ran
+    in one second. A page that stops showing updates is then seen to be the station's side or the page's."""
+    parts = []
+    for live in STARTED:
+        websock = live.ui.server._websock_server  # noqa: SLF001 - diagnosis only
+        buffer = websock._broadcast_buffer  # noqa: SLF001
+        clients = {
+            cid: (state.message_buffer.message_counter, state.message_buffer.atomic_counter)
+            for cid, state in websock._client_state_from_id.items()  # noqa: SLF001
+        }
+        parts.append(
+            f"station on {live.urls.operator}: broadcast pushed {buffer.message_counter}, atomic "
+            f"{buffer.atomic_counter}, sent up to {dict(buffer.generator_cursors)}; own buffers (pushed, "
+            f"atomic) {clients}"
+        )
+    for n, opened in enumerate(OPENED, 1):
+        if opened.page.is_closed():
+            continue
+        try:
+            state = opened.page.wait_for_function(PAGE_STATE_JS, timeout=5_000).json_value()
+        except Exception as exc:  # noqa: BLE001 - a page that does not answer is the finding
+            state = f"no answer within 5 s ({type(exc).__name__})"
+        parts.append(f"page {n} ({opened.page.url}): {state}")
     return "\n".join(parts)
 
 
