@@ -18,7 +18,6 @@ connection's own buffer.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 
 import viser
 import viser.infra
@@ -27,11 +26,16 @@ from viser.infra._async_message_buffer import AsyncMessageBuffer
 
 class ThreadSafeWakeup(asyncio.Event):
     """An `asyncio.Event` of `loop` whose `set()` may be called from any thread: off the loop's own thread
-    the set runs on the loop instead (and is dropped once the loop has closed: nobody waits any more)."""
+    the set runs on the loop instead (and is dropped once the loop has closed: nobody waits any more).
+
+    A frame pushes hundreds of messages, each with a `set()`; while one handed-over set is still waiting to
+    run, further ones add nothing (it runs after them, and the sender then reads every message pushed so far),
+    so they are not handed over again."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         super().__init__()
         self._home = loop
+        self._handed_over = False  # a set is queued on the loop and has not started yet
 
     def set(self) -> None:
         try:
@@ -41,8 +45,17 @@ class ThreadSafeWakeup(asyncio.Event):
         if running is self._home:
             super().set()
             return
-        with contextlib.suppress(RuntimeError):  # the loop has closed
-            self._home.call_soon_threadsafe(super().set)
+        if self._handed_over:
+            return
+        self._handed_over = True
+        try:
+            self._home.call_soon_threadsafe(self._set_on_loop)
+        except RuntimeError:  # the loop has closed
+            self._handed_over = False
+
+    def _set_on_loop(self) -> None:
+        self._handed_over = False  # first: a set from another thread from now on is handed over again
+        super().set()
 
 
 def _make_safe(buffer: AsyncMessageBuffer) -> None:

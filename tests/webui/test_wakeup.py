@@ -141,3 +141,34 @@ def test_the_broadcast_buffer_and_each_new_connections_buffer_wake_safely(server
                 socket.recv(timeout=0.5)
         server.gui.add_markdown("pushed from the test's thread")  # reaches the sender through the new event
         assert socket.recv(timeout=5.0)
+
+
+def test_sets_from_another_thread_while_one_is_queued_are_handed_over_once():
+    loop = asyncio.new_event_loop()
+    try:
+        event = ThreadSafeWakeup(loop)
+        handed: list[object] = []
+        real = loop.call_soon_threadsafe
+
+        def counting(callback, *args):
+            handed.append(callback)
+            return real(callback, *args)
+
+        loop.call_soon_threadsafe = counting  # type: ignore[method-assign]
+
+        def push(times: int) -> None:
+            setter = threading.Thread(target=lambda: [event.set() for _ in range(times)])
+            setter.start()
+            setter.join(5.0)
+
+        push(200)
+        assert len(handed) == 1 and not event.is_set()
+        loop.run_until_complete(asyncio.sleep(0))
+        assert event.is_set()
+        event.clear()
+        push(3)  # the queued set has run: the next one is handed over again
+        assert len(handed) == 2
+        loop.run_until_complete(asyncio.sleep(0))
+        assert event.is_set()
+    finally:
+        loop.close()
