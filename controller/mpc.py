@@ -743,7 +743,7 @@ class ModelPredictiveController:
             extra_rows, extra_lower = np.zeros((count, self._n_exact)), np.empty(count)
             found, iterations, violation, shortfall = solve_with_planes(
                 self._input_to_state,
-                self._free_response(np.concatenate([position_m, velocity_mps]), f),
+                self._free_x0,
                 steps,
                 normals,
                 offsets,

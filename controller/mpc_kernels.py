@@ -374,7 +374,7 @@ def plane_shortfall(
 @numba.njit(cache=True)
 def solve_with_planes(
     input_to_state,
-    free,
+    free_x0,
     steps,
     normals,
     offsets,
@@ -401,23 +401,25 @@ def solve_with_planes(
 ):  # pragma: no cover - compiled; tested against ExactQp.finish's path through ModelPredictiveController
     """ExactQp.finish for the solve where only half-plane rows failed the closed form z (n,) (its fixed rows
     all held, so step 2 has nothing to re-solve): write the rows into extra (R, n), zero beyond the inputs
-    and slacks, and their bounds into lower (R,) (`half_plane_rows`, free (6(N+1),) the free response); keep
-    z when no row misses by more than the rows' tolerance, else solve the whole problem by the compiled
-    active set (active_set = ExactQp.compiled_active_set); roll the plan out (`rollout`). Returns (path,
-    iterations, largest state-bound excursion, largest half-plane shortfall); PLANES_UNSOLVED writes no plan.
+    and slacks, and their bounds into lower (R,) (`half_plane_rows` on the free response from x(0) =
+    (position, velocity) by free_x0 (6(N+1), 6) and input_to_state); keep z when no row misses by more than
+    the rows' tolerance, else solve the whole problem by the compiled active set (active_set =
+    ExactQp.compiled_active_set); roll the plan out (`rollout`). Returns (path, iterations, largest
+    state-bound excursion, largest half-plane shortfall); PLANES_UNSOLVED writes no plan.
 
-    The same decisions and the same bits as mpc.py's path through ExactQp.finish, with one difference: the
-    rows' values at z, which decide only whether z stands, are summed here in order, there by BLAS."""
+    The same decisions and the same bits as mpc.py's path through ExactQp.finish: every product that numpy
+    hands to BLAS there (the free response, the rows' values at z) is numba's np.dot here, which calls BLAS
+    too (docs/fast-core.md, "Bits in compiled code")."""
+    x0 = np.empty(6)
+    x0[:3], x0[3:] = position, velocity
+    free = np.dot(free_x0, x0) + np.dot(input_to_state, (f + gravity).ravel())
     half_plane_rows(input_to_state, free, steps, normals, offsets, soft, extra, lower)
     tol = active_set[6]
-    n = z.shape[0]
     count = steps.shape[0]
+    values = np.dot(extra, z)
     missed = False
     for r in range(count):
-        value = 0.0
-        for j in range(n):
-            value += extra[r, j] * z[j]
-        if value < lower[r] - tol:
+        if values[r] < lower[r] - tol:
             missed = True
             break
     path, iterations = PLANES_CLOSED_FORM, 0
