@@ -28,9 +28,9 @@ class ThreadSafeWakeup(asyncio.Event):
     """An `asyncio.Event` of `loop` whose `set()` may be called from any thread: off the loop's own thread
     the set runs on the loop instead (and is dropped once the loop has closed: nobody waits any more).
 
-    A frame pushes hundreds of messages, each with a `set()`; while one handed-over set is still waiting to
-    run, further ones add nothing (it runs after them, and the sender then reads every message pushed so far),
-    so they are not handed over again."""
+    A frame pushes dozens of messages (73 for 16 MAVs), each with a `set()`; while one handed-over set
+    waits to run, further ones add nothing (it runs after them, and the sender then reads every message
+    pushed so far), so they are not handed over again."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         super().__init__()
