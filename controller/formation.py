@@ -59,11 +59,13 @@ from controller.reference import (
     plan_state_at,
     terminal_reference,
 )
+from controller.reference_kernel import aim, start_and_horizon
 from controller.separation import (
     SeparationRows,
     held_rows,
     imminent_miss_m,
     separation_rows,
+    tick_separation_rows,
 )
 from controller.separation_kernel import row_inflation
 from controller.teammates import TeammateView, align_rows
@@ -98,7 +100,9 @@ class ControllerStats:
 
 @dataclass(frozen=True, eq=False)
 class _Tick:
-    """What one step knows before planning: its time, own state, person, role and the MPC's start state."""
+    """What one step knows before planning: its time, own state, person, role and the MPC's start state;
+    horizon (2, N+1, 3): our previous plan's positions and velocities on this tick's horizon when they were
+    computed with the start state (`reference_kernel`), else None (`_own_horizon` computes them)."""
 
     now_s: float
     own: VehicleState
@@ -106,6 +110,7 @@ class _Tick:
     in_formation: bool
     start_p: np.ndarray
     start_v: np.ndarray
+    horizon: np.ndarray | None = None
 
 
 def _finite(*arrays) -> bool:
@@ -130,8 +135,12 @@ class FormationController:
     """The formation controller of MAV `vehicle_id`, one per MAV. It keeps the MPC's warm start, its own
     previous plan (the reference it is being flown along) and counters; nothing else."""
 
-    def __init__(self, *, vehicle_id: int, params: ControllerParams) -> None:
+    def __init__(self, *, vehicle_id: int, params: ControllerParams, compiled: bool = True) -> None:
+        """compiled: the start state, our previous plan on the horizon and the terminal reference by
+        reference_kernel.py, the separation rows in one call (`separation.tick_separation_rows`): the default;
+        or the numpy form and the composition of kernels they replace, their reference (the same bits)."""
         self._id = int(vehicle_id)
+        self._compiled = bool(compiled)
         self._params = params
         self._method = Method(params.method)
         self._terms = FieldTerms.for_method(self._method)
@@ -151,6 +160,7 @@ class FormationController:
         # (N+1, 3) the external inputs of a plan without the fields (holds, escapes, PRICE's MPC, brakes)
         self._no_inputs = np.zeros((self._steps, 3))
         self._no_inputs.setflags(write=False)
+        self._unused_inputs = np.zeros((self._steps, 3))  # `aim`'s inputs without the pass-through
         self._obstacle_key: tuple[int, ...] | None = None
         self._obstacle_refs: tuple[Obstacle, ...] = ()
         self._obstacle_set = ObstacleSet.from_obstacles(())
@@ -220,8 +230,8 @@ class FormationController:
         is one).
         """
         self._counts["ticks"] += 1
-        start_p, start_v = self._start_state(now_s, own)
-        tick = _Tick(now_s, own, person, in_formation, start_p, start_v)
+        start_p, start_v, horizon = self._start_state(now_s, own)
+        tick = _Tick(now_s, own, person, in_formation, start_p, start_v, horizon)
         reason = self._invalid_reason(now_s, own, person, formation)
         if reason is not None:
             self._counts["rejected_inputs"] += 1
@@ -353,11 +363,45 @@ class FormationController:
             return None, None
         return plan_state_at(plan.positions_m, plan.velocities_mps, elapsed_s=elapsed, dt_s=plan.dt_s)
 
-    def _start_state(self, now_s: float, own: VehicleState) -> tuple[np.ndarray, np.ndarray]:
-        """The MPC's initial state: the reference on a leash to the measurement (or a stand-in for it)."""
-        ref_p, ref_v = self._reference_state(now_s)
+    def _start_state(
+        self, now_s: float, own: VehicleState
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The MPC's initial state: the reference on a leash to the measurement (or a stand-in for it), and
+        with a sane measurement at a finite time, our previous plan on the horizon (`_Tick.horizon`) in the
+        same compiled call (reference_kernel.py); the numpy form below is its reference and the fallback."""
         pos = np.asarray(own.position_m, dtype=float)
         vel = np.asarray(own.velocity_mps, dtype=float)
+        if self._compiled and math.isfinite(now_s) and _sane(pos, vel):
+            self._last_position = pos.copy()
+            has_plan = self._prev_plan is not None
+            if has_plan:
+                self._refresh_previous_plan()
+            start, horizon = np.empty((2, 3)), np.empty((2, self._steps, 3))
+            start_and_horizon(
+                float(now_s),
+                has_plan,
+                self._prev_both,
+                self._prev_lengths,
+                self._prev_stamps,
+                self._prev_dts,
+                self._two_rows,
+                pos,
+                vel,
+                self._params.reference.leash_position_m,
+                self._params.reference.leash_velocity_mps,
+                self._mpc_params.dt_s,
+                start,
+                horizon,
+            )
+            return start[0], start[1], horizon
+        return (*self._numpy_start_state(now_s, pos, vel), None)
+
+    def _numpy_start_state(
+        self, now_s: float, pos: np.ndarray, vel: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`_start_state`'s start state in numpy: the reference of the compiled call, and the only form for a
+        measurement that is not sane."""
+        ref_p, ref_v = self._reference_state(now_s)
         if _sane(pos, vel):
             self._last_position = pos.copy()
             return initial_state(
@@ -469,6 +513,8 @@ class FormationController:
         """(N+1, 3) positions and velocities of our previous plan on this tick's horizon, moved to begin at
         the start state (a hover there before the first plan). The velocities begin at the measured velocity:
         the braking margins need the vehicle's, and the follower lags the plan."""
+        if tick.horizon is not None:  # computed with the start state
+            return tick.horizon[0], tick.horizon[1]
         if self._prev_plan is not None:
             own_path, own_vel = self._previous_plan_on_horizon(tick.now_s)
             own_path = own_path + (tick.start_p - own_path[0])
@@ -494,28 +540,43 @@ class FormationController:
         own = tick.own
         measured = np.asarray(own.position_m, dtype=float)
         lag = measured - tick.start_p if _sane(measured) else np.zeros(3)
-        ages = mates.ages
-        inflation = np.empty(mates.count)  # both r_sigma (eq. 15) and the age margin, in one compiled pass
-        row_inflation(
-            mates.d_max_m,
-            ages,
-            prm.fields.teammate_d_max_base_m,
-            prm.fields.teammate_speed_mps,
-            prm.fields.teammate_age_grace_s,
-            0.5 * prm.separation.plan_deviation_mps2,
-            inflation,
-        )
-        return separation_rows(
+        if not self._compiled:  # the composition tick_separation_rows replaces, its reference
+            inflation = np.empty(mates.count)
+            f = prm.fields
+            row_inflation(
+                mates.d_max_m,
+                mates.ages,
+                f.teammate_d_max_base_m,
+                f.teammate_speed_mps,
+                f.teammate_age_grace_s,
+                0.5 * prm.separation.plan_deviation_mps2,
+                inflation,
+            )
+            return separation_rows(
+                own_path_m=own_path,
+                own_velocities_mps=own_vel,
+                mates=mates.placed_by(own.gps_offset_m),
+                mate_ages_s=mates.ages,
+                inflation_m=inflation,
+                obstacles=obstacle_set,
+                own_cov_radius_m=self._row_cov_radius(own),
+                dt_s=self._mpc_params.dt_s,
+                own_id=self._id,
+                params=prm.separation,
+                lag_m=lag,
+                floor_m=self._mpc_params.position_min_m[2],
+            )
+        return tick_separation_rows(
             own_path_m=own_path,
             own_velocities_mps=own_vel,
-            mates=mates.placed_by(own.gps_offset_m),
-            mate_ages_s=ages,
-            inflation_m=inflation,
+            mates=mates,
+            own_gps_offset_m=own.gps_offset_m,
             obstacles=obstacle_set,
             own_cov_radius_m=self._row_cov_radius(own),
             dt_s=self._mpc_params.dt_s,
             own_id=self._id,
             params=prm.separation,
+            fields=prm.fields,
             lag_m=lag,
             floor_m=self._mpc_params.position_min_m[2],
         )
@@ -577,18 +638,7 @@ class FormationController:
     def _previous_plan_on_horizon(self, now_s: float) -> tuple[np.ndarray, np.ndarray]:
         """The previous plan's positions and velocities (N+1, 3) at now_s + n dt (fields.plan_path and
         plan_velocities, in one compiled call)."""
-        plan = self._prev_plan
-        assert plan is not None
-        if self._prev_source is not plan.positions_m:
-            length = len(plan.positions_m)
-            if length > self._prev_both.shape[1]:
-                self._prev_both = np.empty((2, length, 3))
-            self._prev_both[0, :length] = plan.positions_m
-            self._prev_both[1, :length] = plan.velocities_mps
-            self._prev_lengths[:] = length
-            self._prev_stamps[:] = plan.stamp_s
-            self._prev_dts[:] = plan.dt_s
-            self._prev_source = plan.positions_m
+        self._refresh_previous_plan()
         out = np.empty((2, self._steps, 3))
         align_rows(
             self._prev_both,
@@ -602,6 +652,21 @@ class FormationController:
             out,
         )
         return out[0], out[1]
+
+    def _refresh_previous_plan(self) -> None:
+        """Copy the previous plan into align_rows' table, when it changed since the last copy."""
+        plan = self._prev_plan
+        assert plan is not None
+        if self._prev_source is not plan.positions_m:
+            length = len(plan.positions_m)
+            if length > self._prev_both.shape[1]:
+                self._prev_both = np.empty((2, length, 3))
+            self._prev_both[0, :length] = plan.positions_m
+            self._prev_both[1, :length] = plan.velocities_mps
+            self._prev_lengths[:] = length
+            self._prev_stamps[:] = plan.stamp_s
+            self._prev_dts[:] = plan.dt_s
+            self._prev_source = plan.positions_m
 
     def _target(
         self,
@@ -620,6 +685,32 @@ class FormationController:
         ref = self._params.reference
         person_p = np.asarray(person.position_m, dtype=float)
         person_v = np.zeros(3) if price else np.asarray(person.velocity_mps, dtype=float)
+        if self._compiled:
+            bearing = (
+                bearing_rad(from_m=person_p, to_m=tick.start_p)
+                if preferred_bearing_rad is None
+                else float(preferred_bearing_rad)
+            )
+            out = np.empty((2, 3))
+            passing = ref.pass_through and not price
+            aim(
+                tick.start_p,
+                person_p,
+                person_v,
+                bearing,
+                formation.d_des_m,
+                formation.h_des_m,
+                self._steps * mp.dt_s,
+                ref.predict_person,
+                passing,
+                self._displacement_weights,
+                f_total if passing else self._unused_inputs,  # not read; `_no_inputs` is read-only
+                mp.dt_s,
+                self._arena_lo_m,
+                self._arena_hi_m,
+                out,
+            )
+            return out[0], out[1]
         target, target_v = terminal_reference(
             position_m=tick.start_p,
             person_position_m=person_p,

@@ -46,7 +46,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from controller.fields import ObstacleSet, TeammatePaths
+from controller.fields import FieldParams, ObstacleSet, TeammatePaths
 from controller.mpc import HalfPlanes
 from controller.separation_kernel import (
     closest_teammate,
@@ -54,6 +54,7 @@ from controller.separation_kernel import (
     floor_rows_kernel,
     obstacle_rows_kernel,
     teammate_rows_kernel,
+    tick_rows,
 )
 
 
@@ -361,6 +362,74 @@ def separation_rows(
         trunk = slice(t, t + o)
         offsets[trunk] = offsets[trunk] + np.maximum(-(normals[trunk] @ np.asarray(lag_m, dtype=float)), 0.0)
     planes = HalfPlanes(steps=steps, normals_xy=normals[:, :2], normals_z=normals[:, 2], offsets=offsets)
+    return SeparationRows(planes, t, o, closest, closest_index, floor_rows=f)
+
+
+def tick_separation_rows(
+    *,
+    own_path_m: np.ndarray,
+    own_velocities_mps: np.ndarray,
+    mates: TeammatePaths,
+    own_gps_offset_m: np.ndarray,
+    obstacles: ObstacleSet,
+    own_cov_radius_m: float,
+    dt_s: float,
+    own_id: int,
+    params: SeparationParams,
+    fields: FieldParams,
+    lag_m: np.ndarray,
+    floor_m: float,
+) -> SeparationRows:
+    """A controller tick's rows in one compiled call (separation_kernel.tick_rows): `separation_rows` of the
+    teammates placed by the GPS offsets (`TeammatePaths.placed_by`), each teammate's rows grown by
+    `row_inflation` (both covariance radii, eq. 15's age term and `age_margin_m`), with the lag and the floor.
+    The same bits as that composition (tests/controller/test_separation_kernel.py)."""
+    own_path = np.ascontiguousarray(own_path_m, dtype=float)
+    own_vel = np.ascontiguousarray(own_velocities_mps, dtype=float)
+    count, steps = mates.count, own_path.shape[0]
+    out_steps, out_normals, out_offsets = empty_rows((count + obstacles.count + 1) * steps)
+    offsets = np.zeros((count, 3)) if mates.gps_offsets_m is None else mates.gps_offsets_m
+    t, o, f, closest_index, closest = tick_rows(
+        own_path,
+        own_vel,
+        np.ascontiguousarray(mates.positions_m, dtype=float),
+        np.asarray(mates.vehicle_ids, dtype=np.int64),
+        np.asarray(mates.in_formation, dtype=np.bool_),
+        np.asarray(mates.d_max_m, dtype=float),
+        np.asarray(mates.ages, dtype=float),
+        np.ascontiguousarray(offsets, dtype=float),
+        np.asarray(own_gps_offset_m, dtype=float),
+        fields.teammate_d_max_base_m,
+        fields.teammate_speed_mps,
+        fields.teammate_age_grace_s,
+        0.5 * params.plan_deviation_mps2,
+        params.cooperative_age_s,
+        params.separation_m,
+        np.ascontiguousarray(obstacles.centers_m, dtype=float),
+        np.asarray(obstacles.radii_m, dtype=float),
+        np.asarray(obstacles.heights_m, dtype=float),
+        trunk_margin_m(params, float(own_cov_radius_m)),
+        params.obstacle_clearance_m,
+        params.obstacle_row_weight,
+        float(dt_s),
+        int(own_id),
+        params.step_brake_mps2,
+        params.brake_mps2,
+        params.brake_margin_max_m,
+        params.row_reach_m,
+        True,
+        float(floor_m),
+        params.floor_row_weight,
+        np.asarray(lag_m, dtype=float),
+        out_steps,
+        out_normals,
+        out_offsets,
+    )
+    rows = t + o + f
+    normals = out_normals[:rows]
+    planes = HalfPlanes(
+        steps=out_steps[:rows], normals_xy=normals[:, :2], normals_z=normals[:, 2], offsets=out_offsets[:rows]
+    )
     return SeparationRows(planes, t, o, closest, closest_index, floor_rows=f)
 
 

@@ -190,3 +190,91 @@ def closest_teammate(dist):
 def empty_rows(capacity: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Out arrays for a kernel: steps (capacity,) int64, normals (capacity, 3), offsets (capacity,)."""
     return np.zeros(capacity, dtype=np.int64), np.zeros((capacity, 3)), np.zeros(capacity)
+
+
+@numba.njit(cache=True)
+def tick_rows(
+    own_path,  # (S, 3)
+    own_vel,  # (S, 3)
+    mate_pos,  # (J, S, 3) as the teammates' table gives them (not yet placed by the GPS offsets)
+    mate_ids,  # (J,) int64
+    mate_in_formation,  # (J,) bool
+    mate_d_max,  # (J,) m, eq. 15
+    mate_ages,  # (J,) s
+    mate_offsets,  # (J, 3) m, each sender's GPS offset
+    own_offset,  # (3,) m, ours
+    d_max_base,
+    speed,
+    grace,
+    half_deviation,
+    cooperative_age,
+    separation,
+    centers,  # (M, 2)
+    radii,  # (M,)
+    heights,  # (M,)
+    trunk_margin,
+    clearance,
+    obstacle_weight,
+    dt,
+    own_id,
+    step_brake,
+    brake,
+    cap,
+    reach,
+    has_floor,
+    floor,
+    floor_weight,
+    lag,  # (3,) m
+    out_steps,  # ((J + M + 1) S,) int64
+    out_normals,  # ((J + M + 1) S, 3)
+    out_offsets,  # ((J + M + 1) S,)
+):  # pragma: no cover - compiled; tested against what it replaces
+    """One tick's separation rows in one call: what formation.py composed from `row_inflation`,
+    `TeammatePaths.placed_by`, `teammate_rows_kernel`, `obstacle_rows_kernel`, `floor_rows_kernel`,
+    `closest_teammate` and the trunk rows' lag, in their order and with their operations (the lag by np.dot,
+    the BLAS product numpy's @ made): the same bits. Returns (teammate rows, trunk rows, floor rows, closest
+    teammate's index, its distance (m))."""
+    count = mate_pos.shape[0]
+    steps = own_path.shape[0]
+    inflation = np.empty(count)
+    row_inflation(mate_d_max, mate_ages, d_max_base, speed, grace, half_deviation, inflation)
+    gap = np.empty(count)
+    coop = np.empty(count, dtype=np.bool_)
+    for j in range(count):
+        gap[j] = separation + inflation[j]
+        coop[j] = mate_in_formation[j] and mate_ages[j] <= cooperative_age
+    # placed_by: both GPS offsets taken out, only when one of them is not zero (x + 0.0 turns -0.0 into 0.0)
+    shift = np.empty((count, 3))
+    moved = False
+    for j in range(count):
+        for i in range(3):
+            shift[j, i] = own_offset[i] - mate_offsets[j, i]
+            moved = moved or shift[j, i] != 0.0
+    placed = mate_pos
+    if moved:
+        placed = np.empty_like(mate_pos)
+        for j in range(count):
+            for s in range(mate_pos.shape[1]):
+                for i in range(3):
+                    placed[j, s, i] = mate_pos[j, s, i] + shift[j, i]
+    dist = np.empty((count, steps))
+    t = teammate_rows_kernel(
+        own_path, own_vel, placed, mate_ids, coop, gap, dt, own_id, step_brake, brake, cap, reach,
+        out_steps, out_normals, out_offsets, dist,
+    )  # fmt: skip
+    o = obstacle_rows_kernel(
+        own_path, own_vel, centers, radii, heights, trunk_margin, clearance, step_brake, brake, cap, reach,
+        obstacle_weight, out_steps[t:], out_normals[t:], out_offsets[t:],
+    )  # fmt: skip
+    f = 0
+    if has_floor:
+        n = t + o
+        f = floor_rows_kernel(
+            own_path, floor, reach, floor_weight, out_steps[n:], out_normals[n:], out_offsets[n:]
+        )
+    if o:
+        towards = np.dot(out_normals[t : t + o], lag)
+        for r in range(o):
+            out_offsets[t + r] = out_offsets[t + r] + maximum(-towards[r], 0.0)
+    index, closest = closest_teammate(dist)
+    return t, o, f, index, closest

@@ -4,12 +4,14 @@ trunk and floor rows, with and without the vehicle's lag behind its plan)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from controller.fields import FieldParams, ObstacleSet, TeammatePaths, teammate_age_term_m
 from controller.messages import Obstacle
-from controller.separation import SeparationParams, age_margin_m, separation_rows
+from controller.separation import SeparationParams, age_margin_m, separation_rows, tick_separation_rows
 from controller.separation_kernel import row_inflation
 
 STEPS = 16
@@ -126,3 +128,57 @@ def test_row_inflation_is_the_numpy_forms_to_the_bit():
         )
         np.testing.assert_array_equal(got, want)
         np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
+
+
+def test_a_ticks_rows_in_one_call_are_the_composition_they_replace_to_the_bit():
+    """separation.tick_separation_rows against what formation.py composed before it (row_inflation, the
+    teammates placed by the GPS offsets, separation_rows with the row kernels, the lag and the floor) on 1,200
+    random ticks, a third of them with every GPS offset 0 (no placing) and some with -0.0 coordinates: the
+    same rows, counts and closest teammate, every number the same bits."""
+    rng = np.random.default_rng(2026_12_08)
+    fields = FieldParams()
+    for index in range(1200):
+        tick = random_tick(rng)
+        mates = tick["mates"]
+        count = mates.count
+        placed_offsets = index % 3 != 0
+        mates = replace(
+            mates,
+            d_max_m=rng.uniform(0.5, 6.0, count),
+            gps_offsets_m=rng.normal(0.0, 1.0, (count, 3)) if placed_offsets else None,
+        )
+        if count and rng.random() < 0.2:
+            mates.positions_m[0, :, 0] = -0.0
+        own_offset = rng.normal(0.0, 1.0, 3) if placed_offsets else np.zeros(3)
+        lag = tick["lag_m"] if tick["lag_m"] is not None else np.zeros(3)
+        floor = tick["floor_m"] if tick["floor_m"] is not None else 0.5
+        inflation = np.empty(count)
+        row_inflation(
+            mates.d_max_m,
+            mates.ages,
+            fields.teammate_d_max_base_m,
+            fields.teammate_speed_mps,
+            fields.teammate_age_grace_s,
+            0.5 * tick["params"].plan_deviation_mps2,
+            inflation,
+        )
+        kept = ("own_path_m", "own_velocities_mps", "obstacles", "own_cov_radius_m", "dt_s", "own_id")
+        kept += ("params",)
+        common = {key: tick[key] for key in kept} | {"lag_m": lag, "floor_m": floor}
+        want = separation_rows(
+            **common, mates=mates.placed_by(own_offset), mate_ages_s=mates.ages, inflation_m=inflation
+        )
+        got = tick_separation_rows(**common, mates=mates, own_gps_offset_m=own_offset, fields=fields)
+        assert (got.teammate_rows, got.obstacle_rows, got.floor_rows) == (
+            want.teammate_rows,
+            want.obstacle_rows,
+            want.floor_rows,
+        )
+        assert (got.closest_teammate_index, got.closest_teammate_m) == (
+            want.closest_teammate_index,
+            want.closest_teammate_m,
+        )
+        for name in ("steps", "normals_xy", "normals_z", "offsets"):
+            a, b = getattr(got.planes, name), getattr(want.planes, name)
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(np.signbit(a), np.signbit(b))

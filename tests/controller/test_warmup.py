@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
-from controller import fields_kernel, mpc_kernels, qp, separation_kernel, teammates, tracker
+from controller import (
+    fields_kernel,
+    mpc_kernels,
+    qp,
+    reference_kernel,
+    separation_kernel,
+    teammates,
+    tracker,
+)
 from controller.warmup import warm_up
 
 
@@ -19,9 +27,10 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         mpc_kernels.checked_planes,
         mpc_kernels.roll_out_variables,
         qp.compiled_step_3,
-        teammates.align_rows,
         teammates.fresh_paths,
-        separation_kernel.row_inflation,
+        reference_kernel.start_and_horizon,
+        reference_kernel.aim,
+        separation_kernel.tick_rows,
         tracker._predicted,
         tracker._gate_distance_sq,
     )
