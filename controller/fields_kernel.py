@@ -433,9 +433,64 @@ def external_inputs_compiled(
         person_xy = person[:, :2].copy()
     else:
         person_xy = np.ascontiguousarray(np.broadcast_to(person[..., :2], (steps, 2)))
+    out, fault = _run(
+        own, own_velocities_mps, person_xy, teammates, obstacles, team_size, d_des_m, params, terms, own_id,
+        in_formation,
+    )  # fmt: skip
+    return ExternalInputs(
+        total=out[0],
+        tracking=out[1],
+        teammates=out[2],
+        obstacles=out[3],
+        person=out[4],
+        approach=out[5],
+        fault=fault,
+    )
+
+
+def external_input_total(
+    *,
+    own_positions_m: np.ndarray,
+    own_velocities_mps: np.ndarray,
+    person_xy_m: np.ndarray,
+    teammates: TeammatePaths,
+    obstacles: ObstacleSet,
+    team_size: int,
+    d_des_m: float,
+    params: FieldParams,
+    terms: FieldTerms,
+    own_id: int,
+    in_formation: bool,
+) -> tuple[np.ndarray, bool]:
+    """What a controller tick needs of `external_inputs_compiled`: the clamped total (N+1, 3) and the fault
+    flag, for the person's horizontal position at each step, person_xy_m (N+1, 2) (contiguous), without
+    building the terms' message."""
+    out, fault = _run(
+        own_positions_m, own_velocities_mps, person_xy_m, teammates, obstacles, team_size, d_des_m, params,
+        terms, own_id, in_formation,
+    )  # fmt: skip
+    return out[0], fault
+
+
+def _run(
+    own_positions_m: np.ndarray,
+    own_velocities_mps: np.ndarray | None,
+    person_xy: np.ndarray,
+    teammates: TeammatePaths,
+    obstacles: ObstacleSet,
+    team_size: int,
+    d_des_m: float,
+    params: FieldParams,
+    terms: FieldTerms,
+    own_id: int,
+    in_formation: bool,
+) -> tuple[np.ndarray, bool]:
+    """The kernel on the tick's arrays: (the terms' out (6, N+1, 3), in TERMS order after the total; the
+    fault flag)."""
+    own = np.ascontiguousarray(own_positions_m, dtype=float)
     has_vel = own_velocities_mps is not None
     own_vel = np.ascontiguousarray(own_velocities_mps, dtype=float) if has_vel else own
-    out = np.zeros((6, steps, 3))
+    out = np.zeros((6, own.shape[0], 3))
     fault = _kernel(
         own,
         own_vel,
@@ -461,12 +516,4 @@ def external_inputs_compiled(
         bool(in_formation),
         out,
     )
-    return ExternalInputs(
-        total=out[0],
-        tracking=out[1],
-        teammates=out[2],
-        obstacles=out[3],
-        person=out[4],
-        approach=out[5],
-        fault=bool(fault),
-    )
+    return out, bool(fault)

@@ -33,7 +33,7 @@ from controller.fields import (
     covariance_radius_m,
     teammate_paths,
 )
-from controller.fields_kernel import external_inputs_compiled
+from controller.fields_kernel import external_input_total
 from controller.messages import (
     ControlOutput,
     HorizonPlan,
@@ -488,13 +488,15 @@ class FormationController:
     ) -> np.ndarray:
         """(N+1, 3) clamped external inputs on our previous plan (`_own_horizon`)."""
         prm = self._params
-        person_p = np.asarray(person.position_m, dtype=float)
-        if prm.reference.predict_person:
-            person_v = np.asarray(person.velocity_mps, dtype=float)
-            person_p = person_p + person_v * self._step_times
-        ext = external_inputs_compiled(
+        person_xy = np.asarray(person.position_m, dtype=float)[:2]
+        if prm.reference.predict_person:  # the person's constant-velocity prediction at each step
+            person_xy = person_xy + np.asarray(person.velocity_mps, dtype=float)[:2] * self._step_times
+        else:
+            person_xy = np.repeat(person_xy[None, :], self._steps, axis=0)
+        total, fault = external_input_total(
             own_positions_m=own_path,
-            person_position_m=person_p,
+            own_velocities_mps=own_vel,
+            person_xy_m=person_xy,
             teammates=mates,
             obstacles=obstacle_set,
             team_size=1 + int(np.count_nonzero(mates.in_formation)),
@@ -503,11 +505,10 @@ class FormationController:
             terms=self._terms,
             own_id=self._id,
             in_formation=tick.in_formation,
-            own_velocities_mps=own_vel,
         )
-        if ext.fault:
+        if fault:
             self._counts["field_faults"] += 1
-        return ext.total
+        return total
 
     def _own_horizon(self, tick: _Tick) -> tuple[np.ndarray, np.ndarray]:
         """(N+1, 3) positions and velocities of our previous plan on this tick's horizon, moved to begin at

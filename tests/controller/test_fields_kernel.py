@@ -5,13 +5,21 @@ baseline, virtual obstacles, and 16 MAVs over a lossy link (phantom teammates)."
 from __future__ import annotations
 
 import copy
+from typing import Any
 
 import numpy as np
 import pytest
 
 import controller.formation as formation
 from controller.fields import FieldParams, external_inputs
-from controller.fields_kernel import P_GAIN, P_OBSTACLE_PEAK, TERMS, _param_vector, external_inputs_compiled
+from controller.fields_kernel import (
+    P_GAIN,
+    P_OBSTACLE_PEAK,
+    TERMS,
+    _param_vector,
+    external_input_total,
+    external_inputs_compiled,
+)
 from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
 
@@ -40,12 +48,19 @@ def recorded() -> list[dict]:
     """Every external-input call of the flights above, flown with the numpy reference."""
     calls: list[dict] = []
 
-    def reference(**kwargs):
-        calls.append(copy.deepcopy(kwargs))
-        return external_inputs(**kwargs)
+    def reference(*, person_xy_m, **kwargs):
+        """The controller's call (`external_input_total`), answered by the numpy form: the person's
+        horizontal positions (N+1, 2) as (N+1, 3) positions (the inputs read only x and y)."""
+        person = np.zeros((person_xy_m.shape[0], 3))
+        person[:, :2] = person_xy_m
+        call: dict[str, Any] = copy.deepcopy(kwargs)
+        call["person_position_m"] = person
+        calls.append(call)
+        inputs = external_inputs(**call)
+        return inputs.total, inputs.fault
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(formation, "external_inputs_compiled", reference)
+        mp.setattr(formation, "external_input_total", reference)
         for flight in FLIGHTS:
             run_simulation(flight)
     return calls
@@ -73,6 +88,18 @@ def test_compiled_inputs_equal_the_reference_on_every_recorded_instance(recorded
         for name in TERMS:
             worst[name] = max(worst[name], float(np.max(np.abs(getattr(fast, name) - getattr(ref, name)))))
     assert max(worst.values()) < 1e-9, worst
+
+
+def test_the_ticks_call_gives_the_total_and_fault_of_the_full_call_to_the_bit(recorded):
+    """`external_input_total` (what formation.py calls) against `external_inputs_compiled` on every
+    recorded instance: the same total, bit for bit, and the same fault flag."""
+    for kwargs in recorded:
+        full = external_inputs_compiled(**kwargs)
+        person_xy = np.ascontiguousarray(kwargs["person_position_m"][:, :2])
+        rest = {k: v for k, v in kwargs.items() if k != "person_position_m"}
+        total, fault = external_input_total(**rest, person_xy_m=person_xy)
+        assert fault == full.fault
+        np.testing.assert_array_equal(total, full.total)
 
 
 def test_non_finite_total_is_a_fault_with_zero_inputs(recorded):
