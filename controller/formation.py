@@ -41,6 +41,7 @@ from controller.messages import (
     PersonEstimate,
     SolveStatus,
     VehicleState,
+    read_only,
 )
 from controller.mpc import (
     HalfPlanes,
@@ -59,7 +60,7 @@ from controller.reference import (
     plan_state_at,
     terminal_reference,
 )
-from controller.reference_kernel import aim, start_and_horizon
+from controller.reference_kernel import aim, start_and_horizon, waypoint
 from controller.separation import (
     SeparationRows,
     held_rows,
@@ -136,9 +137,10 @@ class FormationController:
     previous plan (the reference it is being flown along) and counters; nothing else."""
 
     def __init__(self, *, vehicle_id: int, params: ControllerParams, compiled: bool = True) -> None:
-        """compiled: the start state, our previous plan on the horizon and the terminal reference by
-        reference_kernel.py, the separation rows in one call (`separation.tick_separation_rows`): the default;
-        or the numpy form and the composition of kernels they replace, their reference (the same bits)."""
+        """compiled: the start state, our previous plan on the horizon, the terminal reference and the
+        way-point by reference_kernel.py, the separation rows in one call (`separation.tick_separation_rows`):
+        the default; or the numpy form and the composition of kernels they replace, their reference (the
+        same bits)."""
         self._id = int(vehicle_id)
         self._compiled = bool(compiled)
         self._params = params
@@ -312,8 +314,8 @@ class FormationController:
                 params=mp,
             )
         plan = self._plan(tick, positions, velocities)
-        wp_p, wp_v, wp_a = self._waypoint(plan)
-        if not _finite(wp_p, wp_v, wp_a):
+        wp_p, wp_v, wp_a, finite = self._waypoint(plan)
+        if not finite:
             return self._brake(tick, SolveStatus.BRAKING, "the way-point was not finite")
         self._prev_plan = plan
         self._formed = self._formed or not hold
@@ -742,11 +744,17 @@ class FormationController:
             gps_offset_m=tick.own.gps_offset_m,
         )
 
-    def _waypoint(self, plan: HorizonPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The set-point: the plan's position, velocity and acceleration waypoint_step steps ahead."""
+    def _waypoint(self, plan: HorizonPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """The set-point: the plan's position, velocity and acceleration waypoint_step steps ahead, (3,)
+        each and read-only (a message takes them without a copy), and whether all are finite."""
         ahead_s = self._params.reference.waypoint_step * plan.dt_s
+        if self._compiled:
+            p, v, a = np.empty(3), np.empty(3), np.empty(3)
+            finite = waypoint(plan.positions_m, plan.velocities_mps, ahead_s, plan.dt_s, p, v, a)
+            return read_only(p), read_only(v), read_only(a), finite
         p, v = plan_state_at(plan.positions_m, plan.velocities_mps, elapsed_s=ahead_s, dt_s=plan.dt_s)
-        return p, v, plan_acceleration_at(plan.velocities_mps, elapsed_s=ahead_s, dt_s=plan.dt_s)
+        a = plan_acceleration_at(plan.velocities_mps, elapsed_s=ahead_s, dt_s=plan.dt_s)
+        return p, v, a, _finite(p, v, a)
 
     def _brake(
         self, tick: _Tick, status: SolveStatus, fault: str, iterations: int = 0, solve_time_s: float = 0.0
@@ -756,7 +764,7 @@ class FormationController:
             position_m=tick.start_p, velocity_mps=tick.start_v, params=self._mpc_params
         )
         plan = self._plan(tick, positions, velocities)
-        wp_p, wp_v, wp_a = self._waypoint(plan)
+        wp_p, wp_v, wp_a, _ = self._waypoint(plan)
         person = tick.person
         if person is not None and _finite(person.position_m):
             yaw = bearing_rad(from_m=wp_p, to_m=np.asarray(person.position_m, dtype=float))

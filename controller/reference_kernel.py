@@ -1,14 +1,16 @@
-"""reference.py's start state and terminal reference for a formation tick, as compiled kernels (numba).
+"""reference.py's start state, terminal reference and way-point for a formation tick, as compiled kernels.
 
 `start_and_horizon`: where the plan starts (`reference.initial_state` on `reference.plan_state_at`: the
 previous plan's state at `now` on a leash to the measurement) and our previous plan on the horizon
 (`teammates.align_rows`, moved to begin there: the path the external inputs and the separation rows are
 computed on), in one call. `aim`: the terminal reference (`reference.terminal_reference` with
-`reference.input_displacement`'s pass-through) clipped into the arena. Both keep numpy's operations in
-numpy's order, its products by `np.dot` (the BLAS call numpy's @ makes) and its clip by `scalar_kernels`: the
-same bits as formation.py's numpy form (tests/controller/test_formation_compiled.py; docs/fast-core.md, "Bits
-in compiled code"). The bearing stays numpy's `arctan2` (numba's differs in the last bit). Compiled code is
-cached on disk (`cache=True`).
+`reference.input_displacement`'s pass-through) clipped into the arena. `waypoint`: the set-point
+(`reference.plan_state_at` and `reference.plan_acceleration_at` a few steps ahead) and whether it is finite.
+
+All keep numpy's operations in numpy's order, its products by `np.dot` (the BLAS call numpy's @ makes) and
+its clip by `scalar_kernels`: the same bits as formation.py's numpy form
+(tests/controller/test_formation_compiled.py; docs/fast-core.md, "Bits in compiled code"). The bearing stays
+numpy's `arctan2` (numba's differs in the last bit). Compiled code is cached on disk (`cache=True`).
 """
 
 from __future__ import annotations
@@ -133,3 +135,36 @@ def aim(
             out[1, i] = out[1, i] + dt * total
     for i in range(3):
         out[0, i] = minimum(maximum(out[0, i], lower[i]), upper[i])
+
+
+@numba.njit(cache=True)
+def waypoint(
+    positions,  # (L, 3) m: a plan's states x(0)..
+    velocities,  # (L, 3) m/s
+    elapsed_s,
+    dt,
+    position_out,  # out (3,) m
+    velocity_out,  # out (3,) m/s
+    acceleration_out,  # out (3,) m/s^2
+):  # pragma: no cover - compiled; tested against formation.py's numpy form
+    """formation `_waypoint`: the plan's position and velocity `elapsed_s` after x(0) (`plan_state_at`:
+    interpolated, held at the last state) and its acceleration on the step that begins there
+    (`plan_acceleration_at`: zero from the last state on); returns whether all nine numbers are finite."""
+    last = positions.shape[0] - 1
+    k = min(max(elapsed_s / dt, 0.0), float(last))
+    lo = min(math.floor(k), last)
+    hi = min(lo + 1, last)
+    a = k - lo
+    b = 1.0 - a
+    step = math.floor(max(elapsed_s / dt, 0.0) + 1e-9)  # a whole step's time may land just below it
+    finite = True
+    for i in range(3):
+        position_out[i] = b * positions[lo, i] + a * positions[hi, i]
+        velocity_out[i] = b * velocities[lo, i] + a * velocities[hi, i]
+        acceleration_out[i] = 0.0 if step >= last else (velocities[step + 1, i] - velocities[step, i]) / dt
+        finite = finite and (
+            math.isfinite(position_out[i])
+            and math.isfinite(velocity_out[i])
+            and math.isfinite(acceleration_out[i])
+        )
+    return finite

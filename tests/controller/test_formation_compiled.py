@@ -1,8 +1,9 @@
 """The formation controller's compiled tick against its numpy form, to the bit, on ticks recorded from
 simulated flights: `FormationController(compiled=True)` (the default: the start state, our previous plan on
-the horizon and the terminal reference by controller/reference_kernel.py, the separation rows in one call)
-against `compiled=False` (the numpy form and the composition of kernels they replace). Each MAV's recorded
-calls replay in order on one controller of each kind: every tick starts from the same previous plan."""
+the horizon, the terminal reference and the way-point by controller/reference_kernel.py, the separation rows
+in one call) against `compiled=False` (the numpy form and the composition of kernels they replace). Each
+MAV's recorded calls replay in order on one controller of each kind: every tick starts from the same previous
+plan."""
 
 from __future__ import annotations
 
@@ -56,7 +57,7 @@ def replayed(recorded):
     often the compiled controller called each kernel."""
     pairs, kernel_calls = [], Counter()
     with pytest.MonkeyPatch.context() as mp:
-        for name in ("start_and_horizon", "aim", "tick_separation_rows"):
+        for name in ("start_and_horizon", "aim", "tick_separation_rows", "waypoint"):
             kernel = getattr(formation, name)
 
             def counted(*args, _kernel=kernel, _name=name, **kwargs):
@@ -87,6 +88,7 @@ def test_the_recorded_ticks_take_every_path_of_the_compiled_tick(replayed):
     assert kernel_calls["start_and_horizon"] > 0.95 * len(pairs)
     assert kernel_calls["aim"] > 0.8 * len(pairs)
     assert kernel_calls["tick_separation_rows"] > 0.95 * len(pairs)
+    assert kernel_calls["waypoint"] > 0.95 * len(pairs)
 
 
 def test_the_compiled_tick_gives_the_numpy_ticks_outputs_to_the_bit(replayed):

@@ -30,6 +30,7 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         teammates.fresh_paths,
         reference_kernel.start_and_horizon,
         reference_kernel.aim,
+        reference_kernel.waypoint,
         separation_kernel.tick_rows,
         tracker._predicted,
         tracker._gate_distance_sq,
