@@ -54,8 +54,9 @@ kernels: $(STAMP)
 	$(PY) -c "from controller.warmup import warm_up; warm_up()"
 
 # numba checks a kernel's cache against the kernel's own module only, not against the kernels it calls in
-# other modules (qp, sparse_rows, dual_active_set, scalar_kernels): after editing one of those, the callers'
-# cached code is stale until it is compiled again. This drops every cached kernel and compiles them afresh.
+# other modules (qp, sparse_rows, dual_active_set, scalar_kernels, teammates): after editing one of those, the
+# callers' cached code is stale until it is compiled again. This drops every cached kernel and compiles them
+# afresh.
 kernels-fresh: $(STAMP)
 	find controller -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(PY) -c "from controller.warmup import warm_up; warm_up()"
