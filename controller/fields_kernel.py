@@ -433,10 +433,19 @@ def external_inputs_compiled(
         person_xy = person[:, :2].copy()
     else:
         person_xy = np.ascontiguousarray(np.broadcast_to(person[..., :2], (steps, 2)))
-    out, fault = _run(
-        own, own_velocities_mps, person_xy, teammates, obstacles, team_size, d_des_m, params, terms, own_id,
-        in_formation,
-    )  # fmt: skip
+    out, fault = input_terms(
+        own_positions_m=own,
+        own_velocities_mps=own_velocities_mps,
+        person_xy_m=person_xy,
+        teammates=teammates,
+        obstacles=obstacles,
+        team_size=team_size,
+        d_des_m=d_des_m,
+        params=params,
+        terms=terms,
+        own_id=own_id,
+        in_formation=in_formation,
+    )
     return ExternalInputs(
         total=out[0],
         tracking=out[1],
@@ -448,10 +457,10 @@ def external_inputs_compiled(
     )
 
 
-def external_input_total(
+def input_terms(
     *,
     own_positions_m: np.ndarray,
-    own_velocities_mps: np.ndarray,
+    own_velocities_mps: np.ndarray | None,
     person_xy_m: np.ndarray,
     teammates: TeammatePaths,
     obstacles: ObstacleSet,
@@ -462,31 +471,9 @@ def external_input_total(
     own_id: int,
     in_formation: bool,
 ) -> tuple[np.ndarray, bool]:
-    """What a controller tick needs of `external_inputs_compiled`: the clamped total (N+1, 3) and the fault
-    flag, for the person's horizontal position at each step, person_xy_m (N+1, 2) (contiguous), without
-    building the terms' message."""
-    out, fault = _run(
-        own_positions_m, own_velocities_mps, person_xy_m, teammates, obstacles, team_size, d_des_m, params,
-        terms, own_id, in_formation,
-    )  # fmt: skip
-    return out[0], fault
-
-
-def _run(
-    own_positions_m: np.ndarray,
-    own_velocities_mps: np.ndarray | None,
-    person_xy: np.ndarray,
-    teammates: TeammatePaths,
-    obstacles: ObstacleSet,
-    team_size: int,
-    d_des_m: float,
-    params: FieldParams,
-    terms: FieldTerms,
-    own_id: int,
-    in_formation: bool,
-) -> tuple[np.ndarray, bool]:
-    """The kernel on the tick's arrays: (the terms' out (6, N+1, 3), in TERMS order after the total; the
-    fault flag)."""
+    """The kernel on a tick's arrays, for the person's horizontal position at each step, person_xy_m (N+1, 2)
+    (contiguous): (6, N+1, 3) in TERMS order (the clamped total first) and the fault flag. What a controller
+    tick calls (it takes the total), without building the terms' message."""
     own = np.ascontiguousarray(own_positions_m, dtype=float)
     has_vel = own_velocities_mps is not None
     own_vel = np.ascontiguousarray(own_velocities_mps, dtype=float) if has_vel else own
@@ -495,7 +482,7 @@ def _run(
         own,
         own_vel,
         has_vel,
-        person_xy,
+        person_xy_m,
         np.ascontiguousarray(teammates.positions_m, dtype=float),
         np.ascontiguousarray(teammates.vehicle_ids, dtype=np.int64),
         np.ascontiguousarray(teammates.in_formation, dtype=np.bool_),

@@ -33,7 +33,7 @@ from controller.fields import (
     covariance_radius_m,
     teammate_paths,
 )
-from controller.fields_kernel import external_input_total
+from controller.fields_kernel import input_terms
 from controller.messages import (
     ControlOutput,
     HorizonPlan,
@@ -495,7 +495,7 @@ class FormationController:
             person_xy = person_xy + np.asarray(person.velocity_mps, dtype=float)[:2] * self._step_times
         else:
             person_xy = np.repeat(person_xy[None, :], self._steps, axis=0)
-        total, fault = external_input_total(
+        terms, fault = input_terms(
             own_positions_m=own_path,
             own_velocities_mps=own_vel,
             person_xy_m=person_xy,
@@ -510,7 +510,7 @@ class FormationController:
         )
         if fault:
             self._counts["field_faults"] += 1
-        return total
+        return terms[0]
 
     def _own_horizon(self, tick: _Tick) -> tuple[np.ndarray, np.ndarray]:
         """(N+1, 3) positions and velocities of our previous plan on this tick's horizon, moved to begin at

@@ -17,8 +17,8 @@ from controller.fields_kernel import (
     P_OBSTACLE_PEAK,
     TERMS,
     _param_vector,
-    external_input_total,
     external_inputs_compiled,
+    input_terms,
 )
 from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
@@ -49,18 +49,18 @@ def recorded() -> list[dict]:
     calls: list[dict] = []
 
     def reference(*, person_xy_m, **kwargs):
-        """The controller's call (`external_input_total`), answered by the numpy form: the person's
-        horizontal positions (N+1, 2) as (N+1, 3) positions (the inputs read only x and y)."""
+        """The controller's call (`input_terms`), answered by the numpy form: the person's horizontal
+        positions (N+1, 2) as (N+1, 3) positions (the inputs read only x and y)."""
         person = np.zeros((person_xy_m.shape[0], 3))
         person[:, :2] = person_xy_m
         call: dict[str, Any] = copy.deepcopy(kwargs)
         call["person_position_m"] = person
         calls.append(call)
         inputs = external_inputs(**call)
-        return inputs.total, inputs.fault
+        return np.stack([getattr(inputs, name) for name in TERMS]), inputs.fault
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(formation, "external_input_total", reference)
+        mp.setattr(formation, "input_terms", reference)
         for flight in FLIGHTS:
             run_simulation(flight)
     return calls
@@ -90,16 +90,17 @@ def test_compiled_inputs_equal_the_reference_on_every_recorded_instance(recorded
     assert max(worst.values()) < 1e-9, worst
 
 
-def test_the_ticks_call_gives_the_total_and_fault_of_the_full_call_to_the_bit(recorded):
-    """`external_input_total` (what formation.py calls) against `external_inputs_compiled` on every
-    recorded instance: the same total, bit for bit, and the same fault flag."""
+def test_the_ticks_call_gives_the_terms_and_fault_of_the_full_call_to_the_bit(recorded):
+    """`input_terms` (what formation.py calls) against `external_inputs_compiled` on every recorded
+    instance: the same total and terms, bit for bit, and the same fault flag."""
     for kwargs in recorded:
         full = external_inputs_compiled(**kwargs)
         person_xy = np.ascontiguousarray(kwargs["person_position_m"][:, :2])
         rest = {k: v for k, v in kwargs.items() if k != "person_position_m"}
-        total, fault = external_input_total(**rest, person_xy_m=person_xy)
+        terms, fault = input_terms(**rest, person_xy_m=person_xy)
         assert fault == full.fault
-        np.testing.assert_array_equal(total, full.total)
+        for index, name in enumerate(TERMS):  # the total first
+            np.testing.assert_array_equal(terms[index], getattr(full, name))
 
 
 def test_non_finite_total_is_a_fault_with_zero_inputs(recorded):
