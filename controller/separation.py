@@ -361,7 +361,21 @@ def separation_rows(
     if lag_m is not None and o:
         trunk = slice(t, t + o)
         offsets[trunk] = offsets[trunk] + np.maximum(-(normals[trunk] @ np.asarray(lag_m, dtype=float)), 0.0)
+    return _rows(steps, normals, offsets, (t, o, f), closest_index, closest)
+
+
+def _rows(
+    steps: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    counts: tuple[int, int, int],
+    closest_index: int,
+    closest: float,
+) -> SeparationRows:
+    """The tick's `SeparationRows` from its rows, steps (R,), normals (R, 3) and offsets (R,), and their
+    (teammate, trunk, floor) counts."""
     planes = HalfPlanes(steps=steps, normals_xy=normals[:, :2], normals_z=normals[:, 2], offsets=offsets)
+    t, o, f = counts
     return SeparationRows(planes, t, o, closest, closest_index, floor_rows=f)
 
 
@@ -417,7 +431,6 @@ def tick_separation_rows(
         params.brake_mps2,
         params.brake_margin_max_m,
         params.row_reach_m,
-        True,
         float(floor_m),
         params.floor_row_weight,
         np.asarray(lag_m, dtype=float),
@@ -426,11 +439,7 @@ def tick_separation_rows(
         out_offsets,
     )
     rows = t + o + f
-    normals = out_normals[:rows]
-    planes = HalfPlanes(
-        steps=out_steps[:rows], normals_xy=normals[:, :2], normals_z=normals[:, 2], offsets=out_offsets[:rows]
-    )
-    return SeparationRows(planes, t, o, closest, closest_index, floor_rows=f)
+    return _rows(out_steps[:rows], out_normals[:rows], out_offsets[:rows], (t, o, f), closest_index, closest)
 
 
 def _reference_rows(

@@ -221,8 +221,7 @@ def tick_rows(
     brake,
     cap,
     reach,
-    has_floor,
-    floor,
+    floor,  # m: the arena's floor
     floor_weight,
     lag,  # (3,) m
     out_steps,  # ((J + M + 1) S,) int64
@@ -266,12 +265,10 @@ def tick_rows(
         own_path, own_vel, centers, radii, heights, trunk_margin, clearance, step_brake, brake, cap, reach,
         obstacle_weight, out_steps[t:], out_normals[t:], out_offsets[t:],
     )  # fmt: skip
-    f = 0
-    if has_floor:
-        n = t + o
-        f = floor_rows_kernel(
-            own_path, floor, reach, floor_weight, out_steps[n:], out_normals[n:], out_offsets[n:]
-        )
+    n = t + o
+    f = floor_rows_kernel(
+        own_path, floor, reach, floor_weight, out_steps[n:], out_normals[n:], out_offsets[n:]
+    )
     if o:
         towards = np.dot(out_normals[t : t + o], lag)
         for r in range(o):
