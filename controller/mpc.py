@@ -46,6 +46,7 @@ from controller.mpc_kernels import (
     PLANES_UNSOLVED,
     checked_planes,
     half_plane_rows,
+    kernel_array,
     plane_shortfall,
     roll_out_variables,
     solve_fast,
@@ -581,10 +582,10 @@ class ModelPredictiveController:
             return None
         steps = np.asarray(half_planes.steps)
         count = steps.shape[0]
-        normals_xy = np.asarray(half_planes.normals_xy, dtype=float)
-        offsets = np.asarray(half_planes.offsets, dtype=float)
-        soft = None if half_planes.soft is None else np.asarray(half_planes.soft)
-        normals_z = None if half_planes.normals_z is None else np.asarray(half_planes.normals_z, dtype=float)
+        normals_xy = kernel_array(half_planes.normals_xy, float)
+        offsets = kernel_array(half_planes.offsets, float)
+        soft = None if half_planes.soft is None else kernel_array(half_planes.soft, None)
+        normals_z = None if half_planes.normals_z is None else kernel_array(half_planes.normals_z, float)
         if (
             steps.ndim != 1
             or normals_xy.shape != (count, 2)
@@ -598,7 +599,7 @@ class ModelPredictiveController:
             )
         if soft is not None and soft.dtype != bool:
             raise ValueError(f"half-plane soft must be an array of bool, got {soft.dtype}")
-        steps = steps.astype(np.int64, copy=False) if steps.dtype.kind in "iu" else None
+        steps = kernel_array(steps, np.int64) if steps.dtype.kind in "iu" else None
         normals, weights = np.empty((count, 3)), np.empty(count)
         if steps is None or not checked_planes(
             steps, normals_xy, normals_z, soft, self._n_steps, normals, weights
@@ -679,7 +680,7 @@ class ModelPredictiveController:
         inputs = np.empty((n, 3))
         positions = np.empty((n + 1, 3))
         velocities = np.empty((n + 1, 3))
-        f = np.ascontiguousarray(external_inputs_mps2)
+        f = external_inputs_mps2  # C-contiguous and writable (`kernel_array`, in solve)
         verdict, violation = solve_fast(
             self._free_x0,
             self._input_to_state,
@@ -910,7 +911,7 @@ class ModelPredictiveController:
             ("target_velocity_mps", target_velocity_mps, (3,)),
             ("external_inputs_mps2", external_inputs_mps2, (n, 3)),
         ):
-            arr = np.asarray(value, dtype=float)
+            arr = kernel_array(value, float)
             if arr.shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
             arrays[name] = arr

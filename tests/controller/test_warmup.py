@@ -1,6 +1,14 @@
-"""controller/warmup.py runs every compiled kernel on a tick's path once."""
+"""controller/warmup.py runs every compiled kernel on a tick's path once, in the specializations a flight
+uses."""
 
 from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
 
 from controller import (
     fields_kernel,
@@ -11,7 +19,28 @@ from controller import (
     teammates,
     tracker,
 )
+from controller.params import Method
 from controller.warmup import warm_up
+
+PROBE = Path(__file__).resolve().parents[1] / "kernel_signature_probe.py"
+# Per method, short flights that reach the MPC's rarer paths: half-planes the closed form misses (from a
+# clustered start), the fixed rows' re-solve (the 100 Hz ring), the price baseline's own half-planes.
+FLIGHTS = {
+    Method.ACTIVE: (
+        {"vehicles": 8, "duration_s": 20.0, "warmup_s": 19.0, "rate_hz": 10.0, "start": "cluster", "seed": 3},
+        {"vehicles": 4, "duration_s": 12.0, "warmup_s": 11.0, "rate_hz": 100.0, "seed": 2},
+    ),
+    Method.PRICE: ({"vehicles": 4, "duration_s": 14.0, "warmup_s": 13.0, "rate_hz": 10.0, "trees": "none"},),
+    Method.DQMPC: (
+        {"vehicles": 5, "duration_s": 14.0, "warmup_s": 13.0, "rate_hz": 10.0, "start": "cluster"},
+    ),
+}
+# What each method's flights must have called, so that "nothing compiled" is not a flight that went nowhere.
+REACHED = {
+    Method.ACTIVE: ("solve_with_planes", "roll_out_variables", "checked_planes"),
+    Method.PRICE: ("checked_planes",),
+    Method.DQMPC: ("checked_planes",),
+}
 
 
 def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
@@ -36,3 +65,24 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         tracker._gate_distance_sq,
     )
     assert all(kernel.signatures for kernel in kernels)
+
+
+@pytest.mark.parametrize("method", list(Method), ids=lambda m: m.value)
+def test_a_flight_after_warm_up_compiles_no_kernel_again(method: Method):
+    """numba compiles a kernel once per layout and writability of its arrays: an array handed over read-only
+    in flight where the warm-up's was writable loads (or, on a fresh install, compiles: 1.4 s for
+    solve_with_planes) a second specialization mid-flight. Checked in a fresh process, as an agent starts."""
+    run = subprocess.run(
+        # -P: the probe's folder (tests/, whose server/ holds tests) does not go before the packages
+        [sys.executable, "-P", str(PROBE), method.value, json.dumps(FLIGHTS[method])],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads(run.stdout.splitlines()[-1])
+    assert {name: report["calls"].get(name, 0) > 0 for name in REACHED[method]} == dict.fromkeys(
+        REACHED[method], True
+    )
+    assert report["gained"] == {}
