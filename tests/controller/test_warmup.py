@@ -23,12 +23,14 @@ from controller.params import Method
 from controller.warmup import warm_up
 
 PROBE = Path(__file__).resolve().parents[1] / "kernel_signature_probe.py"
-# Per method, short flights that reach the MPC's rarer paths: half-planes the closed form misses (from a
-# clustered start), the fixed rows' re-solve (the 100 Hz ring), the price baseline's own half-planes.
+# Per method, short flights that reach the rarer paths: half-planes the closed form misses (from a clustered
+# start), the fixed rows' re-solve (the 100 Hz ring), the price baseline's own half-planes, a lossy link.
 FLIGHTS = {
     Method.ACTIVE: (
         {"vehicles": 8, "duration_s": 20.0, "warmup_s": 19.0, "rate_hz": 10.0, "start": "cluster", "seed": 3},
         {"vehicles": 4, "duration_s": 12.0, "warmup_s": 11.0, "rate_hz": 100.0, "seed": 2},
+        # a lossy link: holds, phantom teammates, late detections re-filtered
+        {"vehicles": 10, "duration_s": 12.0, "warmup_s": 11.0, "rate_hz": 10.0, "seed": 4, "comm_loss": 0.6},
     ),
     Method.PRICE: ({"vehicles": 4, "duration_s": 14.0, "warmup_s": 13.0, "rate_hz": 10.0, "trees": "none"},),
     Method.DQMPC: (
