@@ -135,7 +135,10 @@ class PersonEstimate:
 
     @property
     def position_cov_trace_m2(self) -> float:
-        return float(np.trace(self.cov[:3, :3]))
+        """The position block's trace (m^2): np.trace's sum in its order, left to right (0.2 against 1.5 us;
+        the simulator asks it of every MAV on every tick)."""
+        cov = self.cov
+        return float(cov[0, 0] + cov[1, 1] + cov[2, 2])
 
 
 @dataclass(frozen=True, eq=False)

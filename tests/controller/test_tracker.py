@@ -11,7 +11,7 @@ from filterpy.kalman import KalmanFilter
 from scipy import stats
 
 from controller.measurement import NoiseParams, sample_detection
-from controller.messages import Detection
+from controller.messages import Detection, PersonEstimate
 from controller.tracker import (
     PersonTracker,
     TrackerParams,
@@ -498,3 +498,13 @@ def test_filterpys_inverse_hook_is_numpys_inverse_to_the_bit():
 def test_a_singular_innovation_covariance_raises_as_numpys_inverse_does():
     with pytest.warns(RuntimeWarning), pytest.raises(np.linalg.LinAlgError, match="Singular"):
         _inverse(np.ones((3, 3)))
+
+
+def test_the_estimates_position_trace_is_numpys_trace_to_the_bit():
+    """`position_cov_trace_m2` adds the diagonal itself (the simulator asks it of every MAV every tick): the
+    same bits as np.trace over covariances whose entries span 16 orders of magnitude."""
+    rng = np.random.default_rng(7)
+    for _ in range(2000):
+        cov = rng.random((6, 6)) * 10.0 ** rng.integers(-8, 8, (6, 6)).astype(float)
+        estimate = PersonEstimate(stamp_s=0.0, position_m=np.zeros(3), velocity_mps=np.zeros(3), cov=cov)
+        assert estimate.position_cov_trace_m2 == float(np.trace(cov[:3, :3]))
