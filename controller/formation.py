@@ -34,6 +34,7 @@ from controller.fields import (
     teammate_paths,
 )
 from controller.fields_kernel import input_terms
+from controller.kernel_args import kernel_array
 from controller.messages import (
     ControlOutput,
     HorizonPlan,
@@ -686,8 +687,8 @@ class FormationController:
         """
         mp = self._mpc_params
         ref = self._params.reference
-        person_p = np.asarray(person.position_m, dtype=float)
-        person_v = np.zeros(3) if price else np.asarray(person.velocity_mps, dtype=float)
+        person_p = kernel_array(person.position_m, float)
+        person_v = np.zeros(3) if price else kernel_array(person.velocity_mps, float)
         if self._compiled:
             bearing = (
                 bearing_rad(from_m=person_p, to_m=tick.start_p)

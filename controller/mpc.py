@@ -38,6 +38,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from controller.kernel_args import kernel_array
 from controller.mpc_kernels import (
     CLOSED_FORM,
     INVALID,
@@ -46,7 +47,6 @@ from controller.mpc_kernels import (
     PLANES_UNSOLVED,
     checked_planes,
     half_plane_rows,
-    kernel_array,
     plane_shortfall,
     roll_out_variables,
     solve_fast,

@@ -26,18 +26,6 @@ PLANES_ACTIVE_SET = 1  # the compiled active set solved the QP with the half-pla
 PLANES_UNSOLVED = 2  # it did not end optimal: the caller hands the rows to ExactQp.finish (DAQP decides)
 
 
-def kernel_array(value, dtype) -> np.ndarray:
-    """`value` as a C-contiguous, writable array of `dtype` (None: its own), the one layout the kernels here
-    are compiled for (by `controller.warmup`). numba compiles a kernel once per layout and writability of its
-    arrays, so a caller's read-only or strided array would load, or on a fresh install compile, a second
-    specialization in the middle of a flight (solve_with_planes: 19 ms loaded, 1.4 s compiled). A copy is
-    made only when `value` is not such an array already."""
-    arr = np.asarray(value, dtype=dtype)
-    if arr.flags.c_contiguous and arr.flags.writeable:
-        return arr
-    return np.array(arr, order="C")
-
-
 @numba.njit(cache=True)
 def input_box(
     f: np.ndarray,

@@ -1,9 +1,10 @@
-"""Run in a fresh process by tests/controller/test_warmup.py: `warm_up()` for one method, as an agent or the
-station does before its first tick, then simulated flights of that method; print (JSON) which compiled
-kernels gained a specialization during the flights, and how often the kernels the flights must reach were
-called, so that the test can tell an empty answer from a flight that never went there.
+"""Run in a fresh process by tests/controller/test_warmup.py: `warm_up()` for one method (as an agent or the
+station does before its first tick) or with the default parameters ("default"), then simulated flights, each
+given as `SimConfig` keyword arguments; print (JSON) which compiled kernels gained a specialization during
+the flights, and how often the kernels on the MPC's rarer paths were called, so that the test can tell an
+empty answer from a flight that never went there.
 
-    python kernel_signature_probe.py METHOD FLIGHTS_JSON
+    python -P kernel_signature_probe.py METHOD|default FLIGHTS_JSON
 """
 
 from __future__ import annotations
@@ -46,14 +47,14 @@ def _counting(name: str, calls: Counter):
 
 
 def main() -> None:
-    method, flights = Method(sys.argv[1]), json.loads(sys.argv[2])
-    warm_up(ControllerParams(method=method))
+    warm_up_for, flights = sys.argv[1], json.loads(sys.argv[2])
+    warm_up(None if warm_up_for == "default" else ControllerParams(method=Method(warm_up_for)))
     before = {kernel: len(kernel.signatures) for kernel in _dispatchers()}
     calls: Counter = Counter()
     for name in WATCHED:
         setattr(mpc, name, _counting(name, calls))
     for flight in flights:
-        run_simulation(SimConfig(method=method, **flight))
+        run_simulation(SimConfig(**flight))
     gained = {
         name: [str(sig) for sig in kernel.signatures[before.get(kernel, 0) :]]
         for kernel, name in _dispatchers().items()

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from controller.params import Method, ParameterError
+from controller.params import ControllerParams, Method, ParameterError
 from server.cli.log_options import (
     describe_log,
     log_header,
@@ -44,7 +44,8 @@ def build_station(settings: RunSettings):
     from server.station.ground_station import GroundStation, camera_view
     from vehicles.sim.scenario import build_sim
 
-    warm_up()  # the compiled kernels, before the first tick (compiles once on a fresh install)
+    # the compiled kernels, before the first tick (compiles once on a fresh install)
+    warm_up(ControllerParams(method=settings.method))
     setup = build_sim(settings.scenario(), clock=time.perf_counter)
     return GroundStation(
         mission=setup.mission, control_period_s=1.0 / settings.rate_hz, camera=camera_view(setup.world.camera)
@@ -319,7 +320,8 @@ def run_px4(
     fox, flight_log = start_foxglove(foxglove_port, flight_log=flight_log, header=header)
     from controller.warmup import warm_up
 
-    warm_up()  # the compiled kernels, before the first tick (compiles once on a fresh install)
+    # the compiled kernels, before the first tick (compiles once on a fresh install)
+    warm_up(ControllerParams(method=settings.method))
     typer.echo(f"connecting to {len(urls)} PX4 vehicle(s) ...")
     try:
         stats = asyncio.run(

@@ -45,6 +45,22 @@ REACHED = {
 }
 
 
+def _probe(warm_up_for: str, methods: list[Method]) -> dict:
+    """The probe's report ({"gained": kernel -> new signatures, "calls": kernel -> calls}) for the flights of
+    `methods` after warm_up_for's warm-up, in a fresh process."""
+    flights = [{**flight, "method": m.value} for m in methods for flight in FLIGHTS[m]]
+    run = subprocess.run(
+        # -P: the probe's folder (tests/, whose server/ holds tests) does not go before the packages
+        [sys.executable, "-P", str(PROBE), warm_up_for, json.dumps(flights)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    return json.loads(run.stdout.splitlines()[-1])
+
+
 def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
     """Every kernel the tick calls from Python. Kernels called only from other kernels (the rollout inside
     `roll_out_variables`, the active set inside `compiled_step_3`) are compiled into their callers: loaded
@@ -73,18 +89,18 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
 def test_a_flight_after_warm_up_compiles_no_kernel_again(method: Method):
     """numba compiles a kernel once per layout and writability of its arrays: an array handed over read-only
     in flight where the warm-up's was writable loads (or, on a fresh install, compiles: 1.4 s for
-    solve_with_planes) a second specialization mid-flight. Checked in a fresh process, as an agent starts."""
-    run = subprocess.run(
-        # -P: the probe's folder (tests/, whose server/ holds tests) does not go before the packages
-        [sys.executable, "-P", str(PROBE), method.value, json.dumps(FLIGHTS[method])],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        check=False,
-    )
-    assert run.returncode == 0, run.stderr[-3000:]
-    report = json.loads(run.stdout.splitlines()[-1])
+    solve_with_planes) a second specialization mid-flight. The warm-up for the method, as an agent and the
+    station run it; checked in a fresh process, as they start."""
+    report = _probe(method.value, [method])
     assert {name: report["calls"].get(name, 0) > 0 for name in REACHED[method]} == dict.fromkeys(
         REACHED[method], True
     )
     assert report["gained"] == {}
+
+
+def test_the_default_warm_up_covers_every_methods_flight():
+    """The kernels take one layout whatever the method (`controller/kernel_args.py`), so `warm_up()` with the
+    default parameters leaves nothing for a price or dqmpc flight to compile either."""
+    report = _probe("default", list(Method))
+    assert report["gained"] == {}
+    assert report["calls"].get("solve_with_planes", 0) > 0
