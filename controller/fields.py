@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.angles import wrap_angle
+from controller.kernel_args import kernel_array
 from controller.messages import HorizonPlan, Obstacle, read_only
 
 HALF_PI = 0.5 * np.pi
@@ -202,6 +203,14 @@ class ObstacleSet:
     @property
     def count(self) -> int:
         return int(self.radii_m.shape[0])
+
+    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(centers_m, radii_m, heights_m) as the compiled kernels take them (`kernel_array`)."""
+        return (
+            kernel_array(self.centers_m, float),
+            kernel_array(self.radii_m, float),
+            kernel_array(self.heights_m, float),
+        )
 
 
 @dataclass(frozen=True, eq=False)

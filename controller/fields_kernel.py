@@ -16,6 +16,7 @@ import numba
 import numpy as np
 
 from controller.fields import ExternalInputs, FieldParams, FieldTerms, ObstacleSet, TeammatePaths
+from controller.kernel_args import kernel_array
 
 HALF_PI = 0.5 * np.pi
 TWO_PI = 2.0 * np.pi
@@ -426,7 +427,7 @@ def external_inputs_compiled(
     own_velocities_mps: np.ndarray | None = None,
 ) -> ExternalInputs:
     """fields.external_inputs, compiled: same arguments, same result (to round-off)."""
-    own = np.ascontiguousarray(own_positions_m, dtype=float)
+    own = np.asarray(own_positions_m, dtype=float)  # input_terms hands it on as the kernel takes it
     steps = own.shape[0]
     person = np.asarray(person_position_m, dtype=float)
     if person.shape == (steps, 3):
@@ -474,22 +475,23 @@ def input_terms(
     """The kernel on a tick's arrays, for the person's horizontal position at each step, person_xy_m (N+1, 2)
     (contiguous): (6, N+1, 3) in TERMS order (the clamped total first) and the fault flag. What a controller
     tick calls (it takes the total), without building the terms' message."""
-    own = np.ascontiguousarray(own_positions_m, dtype=float)
+    own = kernel_array(own_positions_m, float)
     has_vel = own_velocities_mps is not None
-    own_vel = np.ascontiguousarray(own_velocities_mps, dtype=float) if has_vel else own
+    own_vel = kernel_array(own_velocities_mps, float) if has_vel else own
     out = np.zeros((6, own.shape[0], 3))
+    centers, radii, heights = obstacles.kernel_arrays()
     fault = _kernel(
         own,
         own_vel,
         has_vel,
-        person_xy_m,
-        np.ascontiguousarray(teammates.positions_m, dtype=float),
-        np.ascontiguousarray(teammates.vehicle_ids, dtype=np.int64),
-        np.ascontiguousarray(teammates.in_formation, dtype=np.bool_),
-        np.ascontiguousarray(teammates.d_max_m, dtype=float),
-        np.ascontiguousarray(obstacles.centers_m, dtype=float),
-        np.ascontiguousarray(obstacles.radii_m, dtype=float),
-        np.ascontiguousarray(obstacles.heights_m, dtype=float),
+        kernel_array(person_xy_m, float),
+        kernel_array(teammates.positions_m, float),
+        kernel_array(teammates.vehicle_ids, np.int64),
+        kernel_array(teammates.in_formation, np.bool_),
+        kernel_array(teammates.d_max_m, float),
+        centers,
+        radii,
+        heights,
         int(team_size),
         float(d_des_m),
         _param_vector(params),

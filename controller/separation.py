@@ -47,6 +47,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from controller.fields import FieldParams, ObstacleSet, TeammatePaths
+from controller.kernel_args import kernel_array
 from controller.mpc import HalfPlanes
 from controller.separation_kernel import (
     closest_teammate,
@@ -398,30 +399,31 @@ def tick_separation_rows(
     teammates placed by the GPS offsets (`TeammatePaths.placed_by`), each teammate's rows grown by
     `row_inflation` (both covariance radii, eq. 15's age term and `age_margin_m`), with the lag and the floor.
     The same bits as that composition (tests/controller/test_separation_kernel.py)."""
-    own_path = np.ascontiguousarray(own_path_m, dtype=float)
-    own_vel = np.ascontiguousarray(own_velocities_mps, dtype=float)
+    own_path = kernel_array(own_path_m, float)
+    own_vel = kernel_array(own_velocities_mps, float)
     count, steps = mates.count, own_path.shape[0]
     out_steps, out_normals, out_offsets = empty_rows((count + obstacles.count + 1) * steps)
     offsets = np.zeros((count, 3)) if mates.gps_offsets_m is None else mates.gps_offsets_m
+    centers, radii, heights = obstacles.kernel_arrays()
     t, o, f, closest_index, closest = tick_rows(
         own_path,
         own_vel,
-        np.ascontiguousarray(mates.positions_m, dtype=float),
-        np.asarray(mates.vehicle_ids, dtype=np.int64),
-        np.asarray(mates.in_formation, dtype=np.bool_),
-        np.asarray(mates.d_max_m, dtype=float),
-        np.asarray(mates.ages, dtype=float),
-        np.ascontiguousarray(offsets, dtype=float),
-        np.asarray(own_gps_offset_m, dtype=float),
+        kernel_array(mates.positions_m, float),
+        kernel_array(mates.vehicle_ids, np.int64),
+        kernel_array(mates.in_formation, np.bool_),
+        kernel_array(mates.d_max_m, float),
+        kernel_array(mates.ages, float),
+        kernel_array(offsets, float),
+        kernel_array(own_gps_offset_m, float),
         fields.teammate_d_max_base_m,
         fields.teammate_speed_mps,
         fields.teammate_age_grace_s,
         0.5 * params.plan_deviation_mps2,
         params.cooperative_age_s,
         params.separation_m,
-        np.ascontiguousarray(obstacles.centers_m, dtype=float),
-        np.asarray(obstacles.radii_m, dtype=float),
-        np.asarray(obstacles.heights_m, dtype=float),
+        centers,
+        radii,
+        heights,
         trunk_margin_m(params, float(own_cov_radius_m)),
         params.obstacle_clearance_m,
         params.obstacle_row_weight,
@@ -433,7 +435,7 @@ def tick_separation_rows(
         params.row_reach_m,
         float(floor_m),
         params.floor_row_weight,
-        np.asarray(lag_m, dtype=float),
+        kernel_array(lag_m, float),
         out_steps,
         out_normals,
         out_offsets,
@@ -490,18 +492,19 @@ def _compiled_rows(
 ):
     """The same as `_reference_rows`, by separation_kernel.py's kernels, each writing its rows after the
     previous one's into one set of arrays (no concatenation)."""
-    own_path = np.ascontiguousarray(own_path, dtype=float)
-    own_vel = np.ascontiguousarray(own_vel, dtype=float)
+    own_path = kernel_array(own_path, float)
+    own_vel = kernel_array(own_vel, float)
     steps = own_path.shape[0]
     count = mates.count
     out_steps, out_normals, out_offsets = empty_rows((count + obstacles.count + 1) * steps)
     dist = np.empty((count, steps))
+    centers, radii, heights = obstacles.kernel_arrays()
     t = teammate_rows_kernel(
         own_path,
         own_vel,
-        np.ascontiguousarray(mates.positions_m, dtype=float),
-        np.asarray(mates.vehicle_ids, dtype=np.int64),
-        np.asarray(cooperative, dtype=np.bool_),
+        kernel_array(mates.positions_m, float),
+        kernel_array(mates.vehicle_ids, np.int64),
+        kernel_array(cooperative, np.bool_),
         params.separation_m + np.asarray(inflation, dtype=float),
         float(dt),
         int(own_id),
@@ -517,9 +520,9 @@ def _compiled_rows(
     o = obstacle_rows_kernel(
         own_path,
         own_vel,
-        np.ascontiguousarray(obstacles.centers_m, dtype=float),
-        np.asarray(obstacles.radii_m, dtype=float),
-        np.asarray(obstacles.heights_m, dtype=float),
+        centers,
+        radii,
+        heights,
         trunk_margin_m(params, float(own_cov_radius)),
         params.obstacle_clearance_m,
         params.step_brake_mps2,
