@@ -98,6 +98,15 @@ def test_a_flight_after_warm_up_compiles_no_kernel_again(method: Method):
     assert report["gained"] == {}
 
 
+def test_the_compiled_kalman_filters_warm_up_covers_its_flights():
+    """`TrackerParams(kalman_filter="compiled")` (not the default) moves the track with controller/kalman.py's
+    kernels: warmed up with it, the active method's flights (late detections re-filtered over the lossy link
+    among them) compile nothing again."""
+    report = _probe("compiled-kf", [Method.ACTIVE])
+    assert report["calls"].get("predicted", 0) > 0 and report["calls"].get("updated", 0) > 0
+    assert report["gained"] == {}
+
+
 def test_the_default_warm_up_covers_every_methods_flight():
     """The kernels take one layout whatever the method (`controller/kernel_args.py`), so `warm_up()` with the
     default parameters leaves nothing for a price or dqmpc flight to compile either."""
