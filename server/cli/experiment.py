@@ -277,7 +277,7 @@ def _run_specs(
     Ctrl-C, 143 on SIGTERM (the worker processes stopped in both)."""
     try:
         with _sigterm_stops_the_runs(), RunProgress(total=len(specs), stream=sys.stderr) as progress:
-            return exp.run_all(
+            results = exp.run_all(
                 specs, jobs=jobs, out_dir=out, resume=resume, progress=progress, cluster=cluster
             )
     except ValueError as err:  # e.g. no scheduler at the cluster address
@@ -287,6 +287,9 @@ def _run_specs(
         how = "terminated" if isinstance(stop, _Terminated) else "interrupted"
         typer.echo(f"\n{how}: the finished runs are kept under {out}; add --resume to continue", err=True)
         raise typer.Exit(code=143 if isinstance(stop, _Terminated) else 130) from None
+    if len(exp.platforms(results)) > 1:  # a cluster of unlike machines, or runs resumed from another's
+        typer.echo(f"warning: {rep.MIXED_PLATFORMS}", err=True)
+    return results
 
 
 def _safety_command(

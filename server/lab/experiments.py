@@ -9,11 +9,12 @@ same world (a paired comparison; see `derive_seed`).
 
 Runs go to a local process pool by default, or, for sweeps that outgrow one machine, to an existing Dask
 distributed cluster (`run_all(..., cluster="tcp://host:8786")`): its workers run the same `run_one`, so a
-run's report is the same wherever it ran (tests/server/lab/test_experiments_cluster.py checks it on a local
-cluster). Dask rather than Ray: it is pure Python from PyPI (a few MB, no native runtime to match between
-machines), a cluster is one `dask scheduler` plus `dask worker ADDRESS --nthreads 1` per core anywhere the
-project is installed, and a client needs nothing but the address; the runs are independent, CPU-bound and
-return small JSON, so a plain task queue is all the sweep needs (docs/fast-core.md, "Sweeps on a cluster").
+run's report is the same wherever it ran on the same numeric platform (numeric_platform.py; each run records
+its own, and tests/server/lab/test_experiments_cluster.py checks the equality on a local cluster). Dask
+rather than Ray: it is pure Python from PyPI (a few MB, no native runtime to match between machines), a
+cluster is one `dask scheduler` plus `dask worker ADDRESS --nthreads 1` per core anywhere the project is
+installed, and a client needs nothing but the address; the runs are independent, CPU-bound and return small
+JSON, so a plain task queue is all the sweep needs (docs/fast-core.md, "Sweeps on a cluster").
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from server.lab.numeric_platform import NumericPlatform, numeric_platform
 
 FAMILIES: tuple[str, ...] = ("methods", "scalability", "commloss", "obstacles")
 
@@ -105,12 +108,15 @@ class RunResult:
     """The outcome of one run: the simulator's JSON report (`{"config", "metrics"}`) or the reason it failed.
 
     wall_s: the worker's wall time for the run (a timing: not part of the reproducible results).
+    platform: the numeric platform the run was computed on (numeric_platform.py: the same seed gives the same
+    bits only on the same one); None where no worker reported it (a worker that died, an older run file).
     """
 
     spec: RunSpec
     report: dict[str, Any] | None
     error: str | None = None
     wall_s: float = 0.0
+    platform: NumericPlatform | None = None
 
     @property
     def ok(self) -> bool:
@@ -351,10 +357,13 @@ def run_one(spec: RunSpec, simulator: str = SIMULATION_MODULE) -> RunResult:
         sim = importlib.import_module(simulator)
         config = sim.SimConfig(**spec.config_fields())
         report = sim.run_simulation(config).to_json()
-        return RunResult(spec=spec, report=report, wall_s=time.perf_counter() - start)
+        return RunResult(
+            spec=spec, report=report, wall_s=time.perf_counter() - start, platform=numeric_platform()
+        )
     except Exception as exc:  # a broken run is recorded and counted; the experiment goes on
         detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
-        return RunResult(spec=spec, report=None, error=detail, wall_s=time.perf_counter() - start)
+        wall_s = time.perf_counter() - start
+        return RunResult(spec=spec, report=None, error=detail, wall_s=wall_s, platform=numeric_platform())
 
 
 def run_document(result: RunResult) -> dict[str, Any]:
@@ -370,6 +379,7 @@ def run_document(result: RunResult) -> dict[str, Any]:
         "sim_fields": result.spec.config_fields(),
         "error": result.error,
         "wall_s": result.wall_s,
+        "platform": None if result.platform is None else result.platform.to_json(),
     }
     return doc
 
@@ -401,7 +411,20 @@ def load_run(spec: RunSpec, out_dir: Path) -> RunResult | None:
     if not same:
         return None
     report = {k: v for k, v in doc.items() if k != "experiment"}
-    return RunResult(spec=spec, report=report, wall_s=float(meta.get("wall_s", 0.0)))
+    try:
+        platform = NumericPlatform.from_json(meta["platform"])
+    except (KeyError, ValueError):  # written before runs recorded it
+        platform = None
+    return RunResult(spec=spec, report=report, wall_s=float(meta.get("wall_s", 0.0)), platform=platform)
+
+
+def platforms(results: Iterable[RunResult]) -> dict[NumericPlatform, int]:
+    """How many of the results were computed on each numeric platform (the ones that recorded it)."""
+    counts: dict[NumericPlatform, int] = {}
+    for result in results:
+        if result.platform is not None:
+            counts[result.platform] = counts.get(result.platform, 0) + 1
+    return counts
 
 
 ProgressCallback = Callable[[int, int, RunResult], None]

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from scipy import stats as scipy_stats
 
-from server.lab.experiments import Condition, Protocol, RunResult
+from server.lab.experiments import Condition, Protocol, RunResult, platforms
 
 # Per-run summary metrics the claims and figures use (names of the simulator's JSON report, flattened).
 ERROR = "tracking_error_m.mean"
@@ -479,6 +479,10 @@ TITLES = {
     "obstacles": 'Number of obstacles (paper: "Statistics of Simulation Experiment" e)',
 }
 TIMING_HEADING = "## Timing"
+MIXED_PLATFORMS = (
+    "These runs were computed on more than one numeric platform: compare them as statistics, not run by run "
+    '(docs/fast-core.md, "Same seed, same result: on which machines").'
+)
 
 
 def _total(values: Sequence[float]) -> str:
@@ -648,7 +652,27 @@ def _timing_section(
         "",
         timing_table(summaries, results),
         "",
+        *platform_lines(results),
     ]
+
+
+def platform_lines(results: Sequence[RunResult]) -> list[str]:
+    """Which numeric platforms computed the runs (server/lab/numeric_platform.py), and a warning when there
+    were several: the same seed gives the same bits only on the same one, so such runs compare as
+    statistics, not one by one."""
+    counts = platforms(results)
+    if not counts:
+        return []
+    lines = ["Numeric platform of the runs (the same seed gives the same bits only on the same one):", ""]
+    for platform, n in counts.items():
+        simd = ", ".join(platform.numpy_simd) or "none"
+        lines.append(
+            f"- {n} run(s): numpy {platform.numpy_version} (SIMD {simd}), OpenBLAS kernel "
+            f"{platform.blas_core or 'unknown'}, {platform.libc}, {platform.machine}"
+        )
+    if len(counts) > 1:
+        lines += ["", f"**{MIXED_PLATFORMS}**"]
+    return [*lines, ""]
 
 
 def reproducible_part(report_md: str) -> str:

@@ -9,6 +9,7 @@ import pytest
 from distributed import LocalCluster
 
 from server.lab import experiments as exp
+from server.lab.numeric_platform import numeric_platform
 from server.lab.simulation import without_timings
 
 CONDITIONS = tuple(
@@ -49,6 +50,14 @@ def test_cluster_runs_equal_the_local_runs(cluster, tmp_path):
     remote = exp.run_all(specs, jobs=1, out_dir=tmp_path / "cluster", cluster=cluster)
     assert [r.spec for r in remote] == specs
     assert _reports(remote) == _reports(local)
+
+
+@pytest.mark.e2e
+def test_cluster_runs_record_the_numeric_platform_they_ran_on(cluster, tmp_path):
+    """Workers on this machine: the platform of this process (a cluster of unlike machines would show more
+    than one, and the report would say so)."""
+    remote = exp.run_all(_specs(), jobs=1, out_dir=tmp_path, cluster=cluster)
+    assert exp.platforms(remote) == {numeric_platform(): len(_specs())}
 
 
 @pytest.mark.e2e
