@@ -22,7 +22,7 @@ HALF_PI = 0.5 * np.pi
 TWO_PI = 2.0 * np.pi
 TERMS = ("total", "tracking", "teammates", "obstacles", "person", "approach")
 
-# Indices into the parameter vector handed to the kernel (`_param_vector`).
+# Indices into the parameter vector handed to the kernel (`param_vector`).
 (
     P_GAIN,
     P_F_MAX,
@@ -54,7 +54,7 @@ TERMS = ("total", "tracking", "teammates", "obstacles", "person", "approach")
 _PARAM_VECTORS: dict[int, tuple[FieldParams, np.ndarray]] = {}
 
 
-def _param_vector(params: FieldParams) -> np.ndarray:
+def param_vector(params: FieldParams) -> np.ndarray:
     """(23,) the kernel's parameters (indices P_*), made once per FieldParams object: a controller hands the
     same object every tick, and looking it up by value (functools.lru_cache) hashes its 30 fields, 2 us."""
     made = _PARAM_VECTORS.get(id(params))
@@ -179,7 +179,7 @@ def _kernel(
 
     own (N+1, 3), own_vel (N+1, 3) (read when has_vel), person_xy (N+1, 2), mate_pos (J, N+1, 3),
     mate_ids (J,), mate_in_formation (J,), mate_d_max (J,), centers (M, 2), radii (M,), heights (M,),
-    prm: `_param_vector`.
+    prm: `param_vector`.
     """
     steps = own.shape[0]
     n_mates = mate_pos.shape[0]
@@ -494,7 +494,7 @@ def input_terms(
         heights,
         int(team_size),
         float(d_des_m),
-        _param_vector(params),
+        param_vector(params),
         terms.tracking,
         terms.teammates,
         terms.obstacles,

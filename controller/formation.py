@@ -33,7 +33,7 @@ from controller.fields import (
     covariance_radius_m,
     teammate_paths,
 )
-from controller.fields_kernel import input_terms
+from controller.fields_kernel import input_terms, param_vector
 from controller.kernel_args import kernel_array
 from controller.messages import (
     ControlOutput,
@@ -66,13 +66,19 @@ from controller.separation import (
     SeparationRows,
     held_rows,
     imminent_miss_m,
+    rows_of,
     separation_rows,
     tick_separation_rows,
+    trunk_margin_m,
 )
 from controller.separation_kernel import row_inflation
 from controller.teammates import TeammateView, align_rows
+from controller.tick_kernel import inputs_and_rows, tick_constants
 
 DEFAULT_COV_M2 = np.eye(3) * 0.25
+# A compiled formation-flight tick goes from its start state to its solve in one call (tick_kernel.py). A
+# test that records the separate wrappers' calls in a simulation turns this off; the results are the same.
+ONE_CALL = True
 
 
 @dataclass(frozen=True)
@@ -113,6 +119,12 @@ class _Tick:
     start_p: np.ndarray
     start_v: np.ndarray
     horizon: np.ndarray | None = None
+
+
+def _aim_bearing(person_p: np.ndarray, start_p: np.ndarray, preferred_rad: float | None) -> float:
+    """The ENU bearing (rad) about the person at which the terminal reference lies: the start position's,
+    or the preferred one when given (`FormationController.step`)."""
+    return bearing_rad(from_m=person_p, to_m=start_p) if preferred_rad is None else float(preferred_rad)
 
 
 def _finite(*arrays) -> bool:
@@ -182,6 +194,14 @@ class FormationController:
         self._prev_stamps = np.zeros(2)
         self._prev_dts = np.zeros(2)
         self._two_rows = np.arange(2)
+        # formation flight's tick from the start state to the solve in one call (tick_kernel.py): compiled,
+        # with the separation rows, not the price baseline (whose MPC takes no inputs)
+        self._one_call = ONE_CALL and compiled and params.separation.enabled and self._method != Method.PRICE
+        self._tick_constants = tick_constants(params, mpc_params)
+        terms = self._terms
+        flags = (terms.tracking, terms.teammates, terms.obstacles, terms.person, terms.approach)
+        self._term_flags = np.array([*flags, terms.dqmpc_thresholds], dtype=np.bool_)
+        self._step_times_flat = np.ascontiguousarray(self._step_times[:, 0])
         self.reset()
 
     @property
@@ -250,19 +270,33 @@ class FormationController:
         obstacle_set = self._obstacles(obstacles)
         # the climb after take-off (a hold before formation flight) keeps no teammate rows: see no teammates
         climbing = hold and not self._formed
-        mates = self._teammates(() if climbing else teammates, now_s, own)
-        own_path, own_vel = self._own_horizon(tick)
-        if price or hold:
-            f_total = self._no_inputs
+        rows: SeparationRows | None
+        if (
+            self._one_call
+            and not hold
+            and tick.horizon is not None
+            and isinstance(teammates, TeammateView)
+            and not teammates.extra
+        ):
+            mates, f_total, target, target_v, rows = self._in_one_call(
+                tick, person, teammates, obstacle_set, formation, preferred_bearing_rad
+            )
         else:
-            f_total = self._inputs(tick, person, mates, obstacle_set, formation, own_path, own_vel)
-        if hold:
-            target, target_v = self._hold_target(tick, person, formation)
-        else:
-            target, target_v = self._target(tick, person, f_total, formation, preferred_bearing_rad, price)
-        rows = self._separation(tick, own_path, own_vel, mates, obstacle_set)
-        if hold and rows is not None:
-            rows = self._hold_rows(tick, rows)
+            mates = self._teammates(() if climbing else teammates, now_s, own)
+            own_path, own_vel = self._own_horizon(tick)
+            if price or hold:
+                f_total = self._no_inputs
+            else:
+                f_total = self._inputs(tick, person, mates, obstacle_set, formation, own_path, own_vel)
+            if hold:
+                target, target_v = self._hold_target(tick, person, formation)
+            else:
+                target, target_v = self._target(
+                    tick, person, f_total, formation, preferred_bearing_rad, price
+                )
+            rows = self._separation(tick, own_path, own_vel, mates, obstacle_set)
+            if hold and rows is not None:
+                rows = self._hold_rows(tick, rows)
         planes = rows.planes if rows is not None and rows.count else None
 
         def solve(aim_p: np.ndarray, aim_v: np.ndarray, inputs: np.ndarray) -> MpcSolution:
@@ -455,6 +489,65 @@ class FormationController:
         )
         self._counts["rejected_plans"] += len(teammates) - len(usable) + mates.rejected
         return mates
+
+    def _in_one_call(
+        self,
+        tick: _Tick,
+        person: PersonEstimate,
+        view: TeammateView,
+        obstacle_set: ObstacleSet,
+        formation: FormationParams,
+        preferred_bearing_rad: float | None,
+    ) -> tuple[TeammatePaths, np.ndarray, np.ndarray, np.ndarray, SeparationRows]:
+        """`_teammates`, `_inputs`, `_target` and `_separation` of a formation-flight tick (compiled, our
+        previous plan on the horizon, no phantom teammates) in one compiled call (tick_kernel.py): the same
+        teammates' paths, external inputs (N+1, 3), terminal position and velocity (3,) and separation rows,
+        to the bit."""
+        assert tick.horizon is not None
+        own, prm = tick.own, self._params
+        cov_radius = self._own_cov_radius(own)
+        capped = min(cov_radius, prm.fields.covariance_radius_cap_m)
+        person_p = kernel_array(person.position_m, float)
+        person_v = kernel_array(person.velocity_mps, float)
+        bearing = _aim_bearing(person_p, tick.start_p, preferred_bearing_rad)
+        table = view.table
+        centers, radii, heights = obstacle_set.kernel_arrays()
+        (mates, ids, flying, offsets, d_max, ages), inputs, fault, target, planes, counts = inputs_and_rows(
+            table.kernel_columns(),
+            table.fresh_rows(view.since_s),
+            float(tick.now_s),
+            self._tick_constants,
+            prm.fields.teammate_d_max_base_m + capped,
+            trunk_margin_m(prm.separation, capped),
+            tick.start_p,
+            tick.horizon,
+            kernel_array(own.position_m, float),
+            kernel_array(own.gps_offset_m, float),
+            person_p,
+            person_v,
+            self._step_times_flat,
+            prm.reference.predict_person,
+            prm.reference.pass_through,
+            bearing,
+            float(formation.d_des_m),
+            float(formation.h_des_m),
+            param_vector(prm.fields),
+            self._term_flags,
+            self._id,
+            tick.in_formation,
+            centers,
+            radii,
+            heights,
+            self._displacement_weights,
+            self._arena_lo_m,
+            self._arena_hi_m,
+        )
+        if fault:
+            self._counts["field_faults"] += 1
+        t, o, f, closest_index, closest = counts
+        rows = rows_of(*planes, (t, o, f), closest_index, closest)
+        mates_paths = TeammatePaths(mates, ids, flying, d_max, 0, ages, offsets)
+        return mates_paths, inputs[0], target[0], target[1], rows
 
     def _obstacles(self, obstacles: Sequence[Obstacle]) -> ObstacleSet:
         """Obstacles as arrays, rebuilt only when the (immutable) obstacle objects change."""
@@ -690,11 +783,7 @@ class FormationController:
         person_p = kernel_array(person.position_m, float)
         person_v = np.zeros(3) if price else kernel_array(person.velocity_mps, float)
         if self._compiled:
-            bearing = (
-                bearing_rad(from_m=person_p, to_m=tick.start_p)
-                if preferred_bearing_rad is None
-                else float(preferred_bearing_rad)
-            )
+            bearing = _aim_bearing(person_p, tick.start_p, preferred_bearing_rad)
             out = np.empty((2, 3))
             passing = ref.pass_through and not price
             aim(

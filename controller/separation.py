@@ -362,10 +362,10 @@ def separation_rows(
     if lag_m is not None and o:
         trunk = slice(t, t + o)
         offsets[trunk] = offsets[trunk] + np.maximum(-(normals[trunk] @ np.asarray(lag_m, dtype=float)), 0.0)
-    return _rows(steps, normals, offsets, (t, o, f), closest_index, closest)
+    return rows_of(steps, normals, offsets, (t, o, f), closest_index, closest)
 
 
-def _rows(
+def rows_of(
     steps: np.ndarray,
     normals: np.ndarray,
     offsets: np.ndarray,
@@ -440,8 +440,8 @@ def tick_separation_rows(
         out_normals,
         out_offsets,
     )
-    rows = t + o + f
-    return _rows(out_steps[:rows], out_normals[:rows], out_offsets[:rows], (t, o, f), closest_index, closest)
+    r = t + o + f
+    return rows_of(out_steps[:r], out_normals[:r], out_offsets[:r], (t, o, f), closest_index, closest)
 
 
 def _reference_rows(

@@ -26,6 +26,11 @@ from controller.fields import (
 from controller.messages import HorizonPlan
 from controller.scalar_kernels import age_term_m, maximum, minimum
 
+# A TeammateTable's columns as `fresh_paths` reads them (`TeammateTable.kernel_columns`)
+TableColumns = tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
+]
+
 
 @numba.njit(cache=True)
 def align_rows(
@@ -273,6 +278,25 @@ class TeammateTable:
         """How many stored plans are stamped at or after since_s (only in-formation ones by default)."""
         return len(self.fresh_ids(since_s, in_formation=in_formation))  # one row per vehicle id
 
+    def fresh_rows(self, since_s: float) -> np.ndarray:
+        """(J,) int64: the rows whose plans are stamped at or after since_s."""
+        return (self._stamps[: self._count] >= since_s).nonzero()[0]  # np.flatnonzero without its wrapper
+
+    def kernel_columns(self) -> TableColumns:
+        """The columns `fresh_paths` reads, in its order: positions (C, L, 3), valid lengths (C,), stamps
+        (C,) s, steps (C,) s, covariance radii (C,) m, vehicle ids (C,), in-formation flags (C,), GPS
+        offsets (C, 3) m (C rows of capacity; rows beyond `count` are unused)."""
+        return (
+            self._positions,
+            self._lengths,
+            self._stamps,
+            self._dts,
+            self._radii,
+            self._row_ids,
+            self._in_formation,
+            self._offsets,
+        )
+
     def paths(
         self,
         *,
@@ -287,22 +311,14 @@ class TeammateTable:
     ) -> TeammatePaths:
         """The plans stamped at or after since_s, aligned to our horizon (now_s + n dt_s, n < steps), with
         their eq. 15 d_max (as fields.teammate_paths), then the extra plans (through teammate_paths)."""
-        n = self._count
-        rows = (self._stamps[:n] >= since_s).nonzero()[0]  # np.flatnonzero without its Python wrapper
+        rows = self.fresh_rows(since_s)
         count = rows.shape[0]
         out = np.empty((count, steps, 3))
         ids, flying, offsets = np.empty(count, np.int64), np.empty(count, np.bool_), np.empty((count, 3))
         d_max, ages = np.empty(count), np.empty(count)
         cap = params.covariance_radius_cap_m
         fresh_paths(
-            self._positions,
-            self._lengths,
-            self._stamps,
-            self._dts,
-            self._radii,
-            self._row_ids,
-            self._in_formation,
-            self._offsets,
+            *self.kernel_columns(),
             rows,
             float(now_s),
             float(dt_s),

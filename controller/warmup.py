@@ -22,8 +22,9 @@ from controller.tracker import PersonTracker
 
 def warm_up(params: ControllerParams | None = None) -> None:
     """One tracker update and estimate, formation-controller steps with a teammate's plan from the plan table
-    and an obstacle within reach, an MPC solve with an active bound (the active-set path), and a QP whose
-    coupling rows need the compiled active-set step, so every kernel on the tick's path has run once."""
+    and an obstacle within reach (one with a phantom teammate as well), an MPC solve with an active bound
+    (the active-set path), and a QP whose coupling rows need the compiled active-set step, so every kernel
+    on the tick's path has run once."""
     params = params or ControllerParams()
     tracker = PersonTracker(params.tracker)
     for stamp in (0.0, 0.02):  # the second predicts (the transition kernel) before it updates
@@ -47,12 +48,21 @@ def warm_up(params: ControllerParams | None = None) -> None:
         vehicle_id=1, stamp_s=0.05, position_m=np.array([8.0, 0.0, 8.0]), velocity_mps=np.zeros(3)
     )
     trunk = Obstacle(obstacle_id="warm-up", center_m=np.array([9.0, -1.5]), radius_m=0.3)
-    for now in (0.05, 0.06):
+    phantom = HorizonPlan(
+        vehicle_id=3,
+        stamp_s=0.0,
+        dt_s=params.mpc.dt_s,
+        positions_m=np.tile([9.0, -2.0, 8.0], (steps, 1)),
+        velocities_mps=np.zeros((steps, 3)),
+    )
+    # formation flight in one call (tick_kernel.py), then the wrappers' kernels, which a tick with a phantom
+    # teammate (a stand-in for one not heard) calls one by one
+    for now, extra in ((0.05, ()), (0.06, ()), (0.07, (phantom,))):
         controller.step(
             now_s=now,
             own=own,
             person=person,
-            teammates=table.view(-1.0),
+            teammates=table.view(-1.0, extra),
             obstacles=(trunk,),
             formation=FormationParams(),
         )

@@ -16,9 +16,9 @@ from controller.fields_kernel import (
     P_GAIN,
     P_OBSTACLE_PEAK,
     TERMS,
-    _param_vector,
     external_inputs_compiled,
     input_terms,
+    param_vector,
 )
 from controller.params import Method
 from server.lab.simulation import SimConfig, run_simulation
@@ -60,6 +60,7 @@ def recorded() -> list[dict]:
         return np.stack([getattr(inputs, name) for name in TERMS]), inputs.fault
 
     with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(formation, "ONE_CALL", False)  # every tick through `input_terms`
         mp.setattr(formation, "input_terms", reference)
         for flight in FLIGHTS:
             run_simulation(flight)
@@ -117,11 +118,11 @@ def test_the_parameter_vector_is_made_once_per_params_object_and_carries_its_val
     """The kernel's parameters are remembered by FieldParams object (not by value): the same object gives
     the same array, another object its own values, even after 20 others have pushed the first one out."""
     base = FieldParams()
-    first = _param_vector(base)
-    assert _param_vector(base) is first
+    first = param_vector(base)
+    assert param_vector(base) is first
     others = [FieldParams(gain=1.0 + i, obstacle_peak_mps2=3.0 + i) for i in range(20)]
     for i, params in enumerate(others):
-        vector = _param_vector(params)
+        vector = param_vector(params)
         assert (vector[P_GAIN], vector[P_OBSTACLE_PEAK]) == (1.0 + i, 3.0 + i)
-    again = _param_vector(base)
+    again = param_vector(base)
     assert (again[P_GAIN], again[P_OBSTACLE_PEAK]) == (base.gain, base.obstacle_peak_mps2)

@@ -59,7 +59,7 @@ def replayed(recorded):
     often the compiled controller called each kernel."""
     pairs, kernel_calls = [], Counter()
     with pytest.MonkeyPatch.context() as mp:
-        for name in ("start_and_horizon", "aim", "tick_separation_rows", "waypoint"):
+        for name in ("start_and_horizon", "aim", "tick_separation_rows", "inputs_and_rows", "waypoint"):
             kernel = getattr(formation, name)
 
             def counted(*args, _kernel=kernel, _name=name, **kwargs):
@@ -82,14 +82,18 @@ def test_more_than_three_thousand_ticks_were_recorded(replayed):
 
 def test_the_recorded_ticks_take_every_path_of_the_compiled_tick(replayed):
     """Formation flight and holds are among them (3,850 and 57 of 3,928 measured, and 21 escapes), and each
-    kernel ran on most ticks."""
+    kernel ran on most ticks: formation flight from the start state to the solve in one call
+    (`inputs_and_rows`, 3,034 measured), the price baseline, holds and ticks with phantom teammates through
+    the wrappers (`aim` 837, `tick_separation_rows` 894)."""
     pairs, kernel_calls = replayed
     statuses = Counter(fast.status for fast, _ in pairs)
     assert statuses[SolveStatus.SOLVED] > 3000
     assert statuses[SolveStatus.HOLD] > 10
     assert kernel_calls["start_and_horizon"] > 0.95 * len(pairs)
-    assert kernel_calls["aim"] > 0.8 * len(pairs)
-    assert kernel_calls["tick_separation_rows"] > 0.95 * len(pairs)
+    assert kernel_calls["inputs_and_rows"] > 0.7 * len(pairs)
+    assert kernel_calls["aim"] > 0.15 * len(pairs)
+    assert kernel_calls["tick_separation_rows"] > 0.15 * len(pairs)
+    assert kernel_calls["inputs_and_rows"] + kernel_calls["tick_separation_rows"] > 0.95 * len(pairs)
     assert kernel_calls["waypoint"] > 0.95 * len(pairs)
 
 

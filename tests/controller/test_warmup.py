@@ -17,6 +17,7 @@ from controller import (
     reference_kernel,
     separation_kernel,
     teammates,
+    tick_kernel,
     tracker,
 )
 from controller.params import Method
@@ -79,6 +80,7 @@ def test_warm_up_leaves_every_kernel_of_the_tick_compiled():
         reference_kernel.aim,
         reference_kernel.waypoint,
         separation_kernel.tick_rows,
+        tick_kernel.inputs_and_rows,
         tracker._predicted,
         tracker._gate_distance_sq,
     )
