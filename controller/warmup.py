@@ -2,7 +2,7 @@
 loop needs it.
 
 The kernels (numba, `cache=True`) compile on their first call and are cached on disk beside their modules; a
-fresh install compiles them once (about 22 s of CPU, docs/fast-core.md), later starts load them in about
+fresh install compiles them once (about 28 s of CPU, docs/fast-core.md), later starts load them in about
 1.5 s. A live ground station calls `warm_up()` before its first control tick, so that tick is not the one
 that pays.
 """
