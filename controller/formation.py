@@ -183,7 +183,7 @@ class FormationController:
         self._cov_key: bytes | None = None
         self._cov_radius = 0.0
         dt = mpc_params.dt_s
-        self._step_times = dt * np.arange(self._steps)[:, None]  # (N+1, 1) n dt
+        self._step_times = dt * np.arange(self._steps)  # (N+1,) n dt
         # input_displacement's weights dt^2 (N - n + 1/2), computed once
         self._displacement_weights = dt * dt * (self._steps - 1 - np.arange(self._steps) + 0.5)
         # The previous plan as align_rows' table of two rows (positions, velocities), filled in place when
@@ -201,7 +201,6 @@ class FormationController:
         terms = self._terms
         flags = (terms.tracking, terms.teammates, terms.obstacles, terms.person, terms.approach)
         self._term_flags = np.array([*flags, terms.dqmpc_thresholds], dtype=np.bool_)
-        self._step_times_flat = np.ascontiguousarray(self._step_times[:, 0])
         self.reset()
 
     @property
@@ -505,8 +504,7 @@ class FormationController:
         to the bit."""
         assert tick.horizon is not None
         own, prm = tick.own, self._params
-        cov_radius = self._own_cov_radius(own)
-        capped = min(cov_radius, prm.fields.covariance_radius_cap_m)
+        capped = self._row_cov_radius(own)  # our covariance radius, capped as the fields and the rows take it
         person_p = kernel_array(person.position_m, float)
         person_v = kernel_array(person.velocity_mps, float)
         bearing = _aim_bearing(person_p, tick.start_p, preferred_bearing_rad)
@@ -525,7 +523,7 @@ class FormationController:
             kernel_array(own.gps_offset_m, float),
             person_p,
             person_v,
-            self._step_times_flat,
+            self._step_times,
             prm.reference.predict_person,
             prm.reference.pass_through,
             bearing,
@@ -586,7 +584,9 @@ class FormationController:
         prm = self._params
         person_xy = np.asarray(person.position_m, dtype=float)[:2]
         if prm.reference.predict_person:  # the person's constant-velocity prediction at each step
-            person_xy = person_xy + np.asarray(person.velocity_mps, dtype=float)[:2] * self._step_times
+            person_xy = (
+                person_xy + np.asarray(person.velocity_mps, dtype=float)[:2] * self._step_times[:, None]
+            )
         else:
             person_xy = np.repeat(person_xy[None, :], self._steps, axis=0)
         terms, fault = input_terms(
