@@ -78,6 +78,11 @@ class FieldParams:
     dqmpc_d_min_m: float = 1.0
     dqmpc_d_max_m: float = 4.0
 
+    def teammate_d_max_head_m(self, own_cov_radius_m: float) -> float:
+        """The part of eq. 15's d_max that is the same for every teammate (m): the base plus our own
+        covariance radius, capped; each teammate's radius and age term are added to it."""
+        return self.teammate_d_max_base_m + min(own_cov_radius_m, self.covariance_radius_cap_m)
+
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
             if not (np.isfinite(value) and value >= 0.0):
@@ -396,10 +401,7 @@ def teammate_paths(
     cap = params.covariance_radius_cap_m
     radii = np.minimum(_stacked_covariance_radii(covs.tobytes()), cap)
     d_max = (
-        params.teammate_d_max_base_m
-        + min(own_cov_radius_m, cap)
-        + radii
-        + teammate_age_term_m(now_s - stamps, params)
+        params.teammate_d_max_head_m(own_cov_radius_m) + radii + teammate_age_term_m(now_s - stamps, params)
     )
     ids = np.array([p.vehicle_id for p in plans], dtype=int)
     in_formation = np.array([p.in_formation for p in plans], dtype=bool)

@@ -515,7 +515,7 @@ class FormationController:
             table.fresh_rows(view.since_s),
             float(tick.now_s),
             self._tick_constants,
-            prm.fields.teammate_d_max_base_m + capped,
+            prm.fields.teammate_d_max_head_m(capped),
             trunk_margin_m(prm.separation, capped),
             tick.start_p,
             tick.horizon,

@@ -324,7 +324,7 @@ class TeammateTable:
             float(dt_s),
             current_position_only,
             cap,
-            params.teammate_d_max_base_m + min(own_cov_radius_m, cap),
+            params.teammate_d_max_head_m(own_cov_radius_m),
             params.teammate_speed_mps,
             params.teammate_age_grace_s,
             out,

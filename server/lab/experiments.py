@@ -27,6 +27,7 @@ import signal
 import time
 import traceback
 import zlib
+from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -420,11 +421,7 @@ def load_run(spec: RunSpec, out_dir: Path) -> RunResult | None:
 
 def platforms(results: Iterable[RunResult]) -> dict[NumericPlatform, int]:
     """How many of the results were computed on each numeric platform (the ones that recorded it)."""
-    counts: dict[NumericPlatform, int] = {}
-    for result in results:
-        if result.platform is not None:
-            counts[result.platform] = counts.get(result.platform, 0) + 1
-    return counts
+    return Counter(result.platform for result in results if result.platform is not None)
 
 
 ProgressCallback = Callable[[int, int, RunResult], None]
